@@ -1,0 +1,76 @@
+// Scene generators: the reference segmental arch (Birhane's test), semicircular verification
+// arches and dry-joint running-bond walls. Defaults reproduce the reference set-ups; lengths in m.
+#pragma once
+
+#include "demcal/dem/scene.hpp"
+
+namespace demcal::dem {
+
+// Segmental arch of equal voussoirs with radial joints between two fixed abutment blocks.
+// The geometry follows from the clear span and rise at the intrados: for the defaults an intrados
+// radius of 0.65 m and an opening half-angle of 67.38 deg.
+struct ArchOptions {
+  double span = 1.2;                 // clear span at the intrados (m)
+  double rise = 0.4;                 // clear rise at the intrados (m)
+  double thickness = 0.16;           // radial thickness of the ring (m)
+  double width = 0.2;                // out-of-plane width (m)
+  int voussoirs = 13;                // blocks in the ring, keystone included
+  double density = 2650;             // kg/m^3
+  double kn = 4e9;                   // Pa/m
+  double ks = 1.6e9;                 // Pa/m
+  double friction_deg = 30.5;        // degrees (converted to rad in the scene)
+  int contacts_per_joint = 15;
+  int load_voussoir = 5;             // counted from the left, 1-based
+  double interface_height = 0.05;    // wooden interface above the voussoir's extrados middle (m)
+  double interface_length = 0.11;    // its horizontal length (m), sets the actuator's contact area
+  double velocity = 0.01;            // m/s (10 mm/s)
+  double max_displacement = 0.012;   // m
+  std::string load = "point";        // "point" | "none"
+  double max_time = 0;               // s; 0 = travel time x 1.5 + 5 s
+  double abutment_depth = 0.3;       // extent of each abutment block below and beside the springing (m)
+
+  void Validate() const;  // throws SceneError naming the flag
+};
+Scene make_arch(const ArchOptions& options);
+
+// Semicircular arch with radial joints on two fixed bases, self-weight only (verification against
+// Milankovitch's minimum thickness). `radius` is the centre-line radius.
+struct SemicircularArchOptions {
+  double radius = 1.0;
+  double thickness_ratio = 0.115;  // t / R
+  int voussoirs = 31;
+  double width = 1.0;
+  double density = 2000;
+  double kn = 1e11;
+  double ks = 1e11;
+  double friction_deg = 70;
+  int contacts_per_joint = 15;
+};
+Scene make_semicircular_arch(const SemicircularArchOptions& options);
+
+// Dry-joint running-bond wall on a fixed base, with a rigid top beam carrying a constant vertical
+// force and pushed horizontally at `load_height` above the top of the wall (cantilever).
+struct WallOptions {
+  double height = 0.9;             // m (courses = round(height / unit_height))
+  double length = 1.0;             // m
+  double thickness = 0.2;          // m, out-of-plane width
+  double unit_height = 0.1;        // m
+  double unit_length = 0.2;        // m
+  double density = 2400;           // kg/m^3
+  double precompression_mpa = 0.15;  // vertical stress on the top (MPa), beam weight included
+  double kn = 2e10;
+  double ks = 8e9;
+  double friction_deg = 32;
+  int contacts_per_joint = 15;
+  double velocity = 0.002;         // m/s
+  double max_displacement = 0.02;  // m
+  bool beam_rotation = false;      // true: the top beam may rotate
+  double beam_height = 0.1;        // m
+  double load_height = 0.1;        // m above the top of the wall where the actuator pushes
+  double max_time = 0;             // s; 0 = travel time x 1.5 + 5 s
+
+  void Validate() const;
+};
+Scene make_wall(const WallOptions& options);
+
+}  // namespace demcal::dem
