@@ -88,7 +88,7 @@ struct Loading {
   Vec2 direction = Vec2(0, -1);         // unit vector of the prescribed motion
   double velocity = 0.01;               // m/s
   double max_displacement = 0.012;      // m, actuator travel after the gravity stage
-  double stiffness = 0;                 // N/m; 0 = automatic (kn of the loaded block's group x 0.022 m^2)
+  double stiffness = 0;                 // N/m; 0 = automatic: largest kn x width x the loaded block's longest edge
   bool compression_only = true;
   double record_interval = 1e-5;        // m of actuator travel between recorded rows
   // Constant external forces applied from the start (wall pre-compression), N, at a world point.

@@ -41,8 +41,11 @@ struct JointReport {
   double open_fraction = 0;   // share of the joint's nodes open (gap > 0) at the end
   double rotation = 0;        // relative rotation of the two blocks since zeroing (rad)
   double slip = 0;            // accumulated plastic (sliding) slip along the joint since zeroing (m)
-  bool hinge = false;         // opened: open_fraction >= 0.25 and |rotation| >= 1e-3 rad
-  bool sliding = false;       // slid: slip >= 2e-4 m
+  // Dominant joints of the mechanism: hinge when open_fraction >= 0.25 and |rotation| >= max(1e-3 rad,
+  // a quarter of the run's largest joint rotation); sliding when slip >= max(0.2 mm, a quarter of
+  // the largest slip).
+  bool hinge = false;
+  bool sliding = false;
 };
 
 struct Recording {

@@ -1,0 +1,237 @@
+#include "demcal/dem/generators.hpp"
+
+#include <cmath>
+#include <numbers>
+#include <string>
+
+namespace demcal::dem {
+
+namespace {
+
+constexpr double kDegree = std::numbers::pi / 180.0;
+
+void check(bool ok, const std::string& flag, const std::string& rule, double value) {
+  if (!ok) throw SceneError(flag, rule + ", got " + std::to_string(value));
+}
+
+JointMaterial material(double kn, double ks, double friction_deg) {
+  JointMaterial m;
+  m.normal_stiffness = kn;
+  m.shear_stiffness = ks;
+  m.friction_angle = friction_deg * kDegree;
+  return m;
+}
+
+Vec2 polar(const Vec2& centre, double radius, double angle) {
+  return centre + radius * Vec2(std::cos(angle), std::sin(angle));
+}
+
+// Straight-sided voussoirs between angles (counter-clockwise polygon).
+Block voussoir(const std::string& name, const Vec2& centre, double r_in, double r_out, double from, double to,
+               double density) {
+  Block b;
+  b.name = name;
+  b.label = "voussoir";
+  b.density = density;
+  b.vertices = {polar(centre, r_in, from), polar(centre, r_in, to), polar(centre, r_out, to), polar(centre, r_out, from)};
+  return b;
+}
+
+Block rectangle(const std::string& name, const std::string& label, double x0, double y0, double x1, double y1,
+                double density) {
+  Block b;
+  b.name = name;
+  b.label = label;
+  b.density = density;
+  b.vertices = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+  return b;
+}
+
+Vec2 centroid_of(const Block& b) {
+  Vec2 c = Vec2::Zero();
+  for (const Vec2& v : b.vertices) c += v;
+  return c / static_cast<double>(b.vertices.size());
+}
+
+}  // namespace
+
+void ArchOptions::Validate() const {
+  check(span > 0 && std::isfinite(span), "--span", "must be positive", span);
+  check(rise > 0 && rise <= span / 2 && std::isfinite(rise), "--rise", "must be in (0, span/2]", rise);
+  check(thickness > 0 && std::isfinite(thickness), "--thickness", "must be positive", thickness);
+  check(width > 0 && std::isfinite(width), "--width", "must be positive", width);
+  check(voussoirs >= 3, "--voussoirs", "must be at least 3", voussoirs);
+  check(density > 0 && std::isfinite(density), "--density", "must be positive", density);
+  check(kn > 0 && std::isfinite(kn), "--kn", "must be positive", kn);
+  check(ks > 0 && std::isfinite(ks), "--ks", "must be positive", ks);
+  check(friction_deg >= 0 && friction_deg < 90, "--friction-deg", "must be in [0, 90)", friction_deg);
+  check(contacts_per_joint >= 2, "--contacts-per-joint", "must be at least 2", contacts_per_joint);
+  check(load_voussoir >= 1 && load_voussoir <= voussoirs, "--load-voussoir", "must be between 1 and --voussoirs",
+        load_voussoir);
+  check(velocity > 0 && std::isfinite(velocity), "--velocity", "must be positive", velocity);
+  check(max_displacement > 0 && std::isfinite(max_displacement), "--max-displacement", "must be positive", max_displacement);
+  check(max_time >= 0 && std::isfinite(max_time), "--max-time", "must not be negative", max_time);
+  if (load != "point" && load != "none") throw SceneError("--load", "must be point or none, got '" + load + "'");
+}
+
+Scene make_arch(const ArchOptions& o) {
+  o.Validate();
+  Scene s;
+  s.name = "arch";
+  s.width = o.width;
+  const double r_in = (o.span * o.span / 4 + o.rise * o.rise) / (2 * o.rise);
+  const double r_out = r_in + o.thickness;
+  const Vec2 centre(0, o.rise - r_in);
+  const double half_angle = std::asin(o.span / 2 / r_in);
+  const double left = std::numbers::pi / 2 + half_angle, step = 2 * half_angle / o.voussoirs;
+  s.joint_groups["arch_joints"] = material(o.kn, o.ks, o.friction_deg);
+  s.joint_groups["abutment_joints"] = material(o.kn, o.ks, o.friction_deg);
+  s.default_joint_group = "arch_joints";
+  s.joint_group_rules = {{"voussoir", "voussoir", "any", "arch_joints"},
+                         {"voussoir", "abutment", "any", "abutment_joints"}};
+
+  // Abutments: fixed blocks whose face matches the radial springing joint.
+  const Vec2 i0 = polar(centre, r_in, left), e0 = polar(centre, r_out, left);
+  const double d = o.abutment_depth;
+  Block abutment_left;
+  abutment_left.name = "abutment_left";
+  abutment_left.label = "abutment";
+  abutment_left.density = o.density;
+  abutment_left.fixed = true;
+  abutment_left.vertices = {i0, e0, {e0.x() - d, e0.y()}, {e0.x() - d, -d}, {i0.x(), -d}};
+  s.blocks.push_back(abutment_left);
+  for (int k = 0; k < o.voussoirs; ++k)
+    s.blocks.push_back(voussoir("voussoir_" + std::to_string(k + 1), centre, r_in, r_out, left - k * step,
+                                left - (k + 1) * step, o.density));
+  Block abutment_right = abutment_left;
+  abutment_right.name = "abutment_right";
+  abutment_right.vertices.clear();
+  for (auto it = abutment_left.vertices.rbegin(); it != abutment_left.vertices.rend(); ++it)
+    abutment_right.vertices.push_back({-it->x(), it->y()});
+  s.blocks.push_back(abutment_right);
+
+  s.contact.points_per_joint = o.contacts_per_joint;
+  s.solver.collapse_displacement = o.thickness;
+  s.solver.max_time = o.max_time > 0 ? o.max_time : o.max_displacement / o.velocity * 1.5 + 5;
+
+  const Block& loaded = s.blocks[o.load_voussoir];  // blocks[0] is the left abutment
+  const Vec2 extrados_middle = 0.5 * (loaded.vertices[2] + loaded.vertices[3]);
+  const Vec2 load_point = extrados_middle + Vec2(0, o.interface_height);
+  if (o.load == "point") {
+    s.loading.type = "point";
+    s.loading.block = loaded.name;
+    s.loading.point = load_point;
+    s.loading.direction = Vec2(0, -1);
+    s.loading.velocity = o.velocity;
+    s.loading.max_displacement = o.max_displacement;
+    s.loading.stiffness = o.kn * o.interface_length * o.width;
+    s.loading.compression_only = true;
+    s.loading.record_interval = o.max_displacement / 1200;
+  }
+  s.gauges.push_back({"load_vertical", loaded.name, load_point, Vec2(0, -1)});
+  s.gauges.push_back({"abutment_horizontal", s.blocks[1].name, centroid_of(s.blocks[1]), Vec2(1, 0)});
+  return s;
+}
+
+Scene make_semicircular_arch(const SemicircularArchOptions& o) {
+  check(o.radius > 0, "radius", "must be positive", o.radius);
+  check(o.thickness_ratio > 0 && o.thickness_ratio < 1, "thickness_ratio", "must be in (0, 1)", o.thickness_ratio);
+  check(o.voussoirs >= 3, "voussoirs", "must be at least 3", o.voussoirs);
+  Scene s;
+  s.name = "semicircular-arch";
+  s.width = o.width;
+  const double t = o.thickness_ratio * o.radius;
+  const double r_in = o.radius - t / 2, r_out = o.radius + t / 2;
+  s.joint_groups["arch_joints"] = material(o.kn, o.ks, o.friction_deg);
+  s.default_joint_group = "arch_joints";
+  const double step = std::numbers::pi / o.voussoirs;
+  s.blocks.push_back(rectangle("base_left", "base", -r_out - t, -t, -r_in + t / 2, 0, o.density));
+  s.blocks.back().fixed = true;
+  for (int k = 0; k < o.voussoirs; ++k)
+    s.blocks.push_back(voussoir("voussoir_" + std::to_string(k + 1), Vec2::Zero(), r_in, r_out,
+                                std::numbers::pi - k * step, std::numbers::pi - (k + 1) * step, o.density));
+  s.blocks.push_back(rectangle("base_right", "base", r_in - t / 2, -t, r_out + t, 0, o.density));
+  s.blocks.back().fixed = true;
+  s.contact.points_per_joint = o.contacts_per_joint;
+  s.solver.collapse_displacement = 0.05 * o.radius;
+  s.solver.max_equilibrium_time = 5;
+  s.solver.max_time = 5;
+  s.loading.type = "none";
+  s.gauges.push_back({"crown_vertical", s.blocks[1 + o.voussoirs / 2].name,
+                      centroid_of(s.blocks[1 + o.voussoirs / 2]), Vec2(0, -1)});
+  return s;
+}
+
+void WallOptions::Validate() const {
+  check(height > 0 && std::isfinite(height), "--height", "must be positive", height);
+  check(length > 0 && std::isfinite(length), "--length", "must be positive", length);
+  check(thickness > 0 && std::isfinite(thickness), "--thickness", "must be positive", thickness);
+  check(unit_height > 0 && unit_height <= height, "--unit-height", "must be in (0, height]", unit_height);
+  check(unit_length > 0 && unit_length <= length, "--unit-length", "must be in (0, length]", unit_length);
+  check(density > 0 && std::isfinite(density), "--density", "must be positive", density);
+  check(precompression_mpa >= 0 && std::isfinite(precompression_mpa), "--precompression", "must not be negative",
+        precompression_mpa);
+  check(kn > 0 && std::isfinite(kn), "--kn", "must be positive", kn);
+  check(ks > 0 && std::isfinite(ks), "--ks", "must be positive", ks);
+  check(friction_deg >= 0 && friction_deg < 90, "--friction-deg", "must be in [0, 90)", friction_deg);
+  check(contacts_per_joint >= 2, "--contacts-per-joint", "must be at least 2", contacts_per_joint);
+  check(velocity > 0 && std::isfinite(velocity), "--velocity", "must be positive", velocity);
+  check(max_displacement > 0 && std::isfinite(max_displacement), "--max-displacement", "must be positive", max_displacement);
+  check(beam_height > 0, "--beam-height", "must be positive", beam_height);
+  check(load_height >= 0, "--load-height", "must not be negative", load_height);
+}
+
+Scene make_wall(const WallOptions& o) {
+  o.Validate();
+  Scene s;
+  s.name = "wall";
+  s.width = o.thickness;
+  s.joint_groups["bed_joints"] = material(o.kn, o.ks, o.friction_deg);
+  s.joint_groups["head_joints"] = material(o.kn, o.ks, o.friction_deg);
+  s.default_joint_group = "bed_joints";
+  s.joint_group_rules = {{"unit", "unit", "horizontal", "bed_joints"},
+                         {"unit", "unit", "vertical", "head_joints"},
+                         {"unit", "base", "any", "bed_joints"},
+                         {"unit", "beam", "any", "bed_joints"}};
+  const double margin = 0.1 * o.length;
+  s.blocks.push_back(rectangle("base", "base", -margin, -o.unit_height, o.length + margin, 0, o.density));
+  s.blocks.back().fixed = true;
+  const int courses = std::max(1, static_cast<int>(std::lround(o.height / o.unit_height)));
+  const double h = o.height / courses;
+  for (int c = 0; c < courses; ++c) {
+    // Running bond: odd courses start with a half unit.
+    std::vector<double> edges = {0};
+    double x = (c % 2 == 1) ? o.unit_length / 2 : o.unit_length;
+    while (x < o.length - 1e-9) {
+      edges.push_back(x);
+      x += o.unit_length;
+    }
+    edges.push_back(o.length);
+    for (std::size_t u = 0; u + 1 < edges.size(); ++u)
+      s.blocks.push_back(rectangle("unit_c" + std::to_string(c + 1) + "_" + std::to_string(u + 1), "unit", edges[u],
+                                   c * h, edges[u + 1], (c + 1) * h, o.density));
+  }
+  const double top = courses * h;
+  s.blocks.push_back(rectangle("beam", "beam", 0, top, o.length, top + o.beam_height, o.density));
+  s.blocks.back().gravity = false;
+  s.blocks.back().fixed_rotation = !o.beam_rotation;
+  const double vertical_force = o.precompression_mpa * 1e6 * o.length * o.thickness;
+  s.loading.constant_forces.push_back({"beam", Vec2(0, -vertical_force), Vec2(o.length / 2, top + o.beam_height)});
+  s.contact.points_per_joint = o.contacts_per_joint;
+  s.solver.collapse_displacement = std::max(0.1, 5 * o.max_displacement);
+  s.solver.max_time = o.max_time > 0 ? o.max_time : o.max_displacement / o.velocity * 1.5 + 5;
+  const Vec2 load_point(0, top + o.load_height);
+  s.loading.type = "wall";
+  s.loading.block = "beam";
+  s.loading.point = load_point;
+  s.loading.direction = Vec2(1, 0);
+  s.loading.velocity = o.velocity;
+  s.loading.max_displacement = o.max_displacement;
+  s.loading.stiffness = o.kn * o.length * o.thickness;
+  s.loading.compression_only = false;
+  s.loading.record_interval = o.max_displacement / 1000;
+  s.gauges.push_back({"top_horizontal", "beam", load_point, Vec2(1, 0)});
+  return s;
+}
+
+}  // namespace demcal::dem

@@ -1,0 +1,477 @@
+#include "demcal/dem/scene.hpp"
+
+#include "geometry.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <iomanip>
+#include <numbers>
+#include <set>
+#include <sstream>
+
+namespace demcal::dem {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr double kDegree = std::numbers::pi / 180.0;
+
+std::string format_value(double v) {
+  std::ostringstream s;
+  s << std::setprecision(10) << v;
+  return s.str();
+}
+
+void require_finite(double v, const std::string& where) {
+  if (!std::isfinite(v)) throw SceneError(where, "value is not a finite number (" + format_value(v) + ")");
+}
+void require_positive(double v, const std::string& where) {
+  require_finite(v, where);
+  if (v <= 0) throw SceneError(where, "must be positive, got " + format_value(v));
+}
+void require_non_negative(double v, const std::string& where) {
+  require_finite(v, where);
+  if (v < 0) throw SceneError(where, "must not be negative, got " + format_value(v));
+}
+void require_unit(const Vec2& v, const std::string& where) {
+  require_finite(v.x(), where);
+  require_finite(v.y(), where);
+  if (std::abs(v.norm() - 1) > 1e-6) throw SceneError(where, "must be a unit vector, got norm " + format_value(v.norm()));
+}
+
+// Reads typed values from one JSON object and names the key path in every error.
+class ObjectReader {
+ public:
+  ObjectReader(const json& object, std::string path) : object_(object), path_(std::move(path)) {
+    if (!object_.is_object()) throw SceneError(path_, "expected a JSON object");
+  }
+  std::string key_path(const std::string& key) const { return path_ + "." + key; }
+  bool has(const std::string& key) const { return object_.contains(key); }
+  const json& required(const std::string& key) const {
+    if (!object_.contains(key)) throw SceneError(path_, "missing key '" + key + "'");
+    return object_.at(key);
+  }
+  double number(const std::string& key, double fallback) const {
+    return has(key) ? to_number(object_.at(key), key_path(key)) : fallback;
+  }
+  double number(const std::string& key) const { return to_number(required(key), key_path(key)); }
+  int integer(const std::string& key, int fallback) const {
+    if (!has(key)) return fallback;
+    const json& v = object_.at(key);
+    if (!v.is_number_integer()) throw SceneError(key_path(key), "expected an integer, got " + v.dump());
+    return v.get<int>();
+  }
+  bool boolean(const std::string& key, bool fallback) const {
+    if (!has(key)) return fallback;
+    const json& v = object_.at(key);
+    if (!v.is_boolean()) throw SceneError(key_path(key), "expected true or false, got " + v.dump());
+    return v.get<bool>();
+  }
+  std::string string(const std::string& key, const std::string& fallback) const {
+    return has(key) ? to_string(object_.at(key), key_path(key)) : fallback;
+  }
+  std::string string(const std::string& key) const { return to_string(required(key), key_path(key)); }
+  Vec2 vec2(const std::string& key, const Vec2& fallback) const {
+    return has(key) ? to_vec2(object_.at(key), key_path(key)) : fallback;
+  }
+  Vec2 vec2(const std::string& key) const { return to_vec2(required(key), key_path(key)); }
+
+  static double to_number(const json& v, const std::string& where) {
+    if (!v.is_number()) throw SceneError(where, "expected a number, got " + v.dump());
+    const double x = v.get<double>();
+    require_finite(x, where);
+    return x;
+  }
+  static std::string to_string(const json& v, const std::string& where) {
+    if (!v.is_string()) throw SceneError(where, "expected a string, got " + v.dump());
+    return v.get<std::string>();
+  }
+  static Vec2 to_vec2(const json& v, const std::string& where) {
+    if (!v.is_array() || v.size() != 2) throw SceneError(where, "expected [x, y], got " + v.dump());
+    return Vec2(to_number(v[0], where + "[0]"), to_number(v[1], where + "[1]"));
+  }
+
+ private:
+  const json& object_;
+  std::string path_;
+};
+
+json vec2_json(const Vec2& v) { return json::array({v.x(), v.y()}); }
+
+}  // namespace
+
+void JointMaterial::Validate(const std::string& where) const {
+  require_positive(normal_stiffness, where + ".kn");
+  require_positive(shear_stiffness, where + ".ks");
+  require_finite(friction_angle, where + ".friction_deg");
+  if (friction_angle < 0 || friction_angle >= std::numbers::pi / 2)
+    throw SceneError(where + ".friction_deg",
+                     "must be in [0, 90) degrees, got " + format_value(friction_angle / kDegree));
+}
+
+int Scene::block_index(const std::string& block_name) const {
+  for (std::size_t i = 0; i < blocks.size(); ++i)
+    if (blocks[i].name == block_name) return static_cast<int>(i);
+  return -1;
+}
+
+void Scene::Validate(const std::string& source) const {
+  const std::string s = source + ": ";
+  require_positive(width, s + "width");
+  require_finite(gravity.x(), s + "gravity[0]");
+  require_finite(gravity.y(), s + "gravity[1]");
+  if (blocks.empty()) throw SceneError(s + "blocks", "the scene has no blocks");
+  if (joint_groups.empty()) throw SceneError(s + "joint_groups", "at least one joint group is needed");
+  for (const auto& [group, material] : joint_groups) material.Validate(s + "joint_groups." + group);
+  if (!default_joint_group.empty() && !joint_groups.count(default_joint_group))
+    throw SceneError(s + "default_joint_group", "unknown joint group '" + default_joint_group + "'");
+  for (std::size_t r = 0; r < joint_group_rules.size(); ++r) {
+    const auto& rule = joint_group_rules[r];
+    const std::string where = s + "joint_group_rules[" + std::to_string(r) + "]";
+    if (!joint_groups.count(rule.joint_group))
+      throw SceneError(where + ".joint_group", "unknown joint group '" + rule.joint_group + "'");
+    if (rule.orientation != "any" && rule.orientation != "horizontal" && rule.orientation != "vertical")
+      throw SceneError(where + ".orientation", "must be any, horizontal or vertical, got '" + rule.orientation + "'");
+  }
+
+  std::set<std::string> names;
+  bool any_free = false;
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    const Block& b = blocks[i];
+    const std::string where = s + "blocks[" + std::to_string(i) + "] '" + b.name + "'";
+    if (b.name.empty()) throw SceneError(s + "blocks[" + std::to_string(i) + "].name", "a block needs a name");
+    if (!names.insert(b.name).second) throw SceneError(where, "duplicate block name");
+    require_positive(b.density, where + ".density");
+    if (b.vertices.size() < 3) throw SceneError(where + ".vertices", "a block needs at least 3 vertices");
+    for (std::size_t v = 0; v < b.vertices.size(); ++v) {
+      require_finite(b.vertices[v].x(), where + ".vertices[" + std::to_string(v) + "]");
+      require_finite(b.vertices[v].y(), where + ".vertices[" + std::to_string(v) + "]");
+    }
+    const double area = geometry::signed_area(b.vertices);
+    double extent = 0;
+    for (const Vec2& v : b.vertices) extent = std::max(extent, (v - b.vertices[0]).norm());
+    if (std::abs(area) <= 1e-12 * std::max(extent * extent, 1e-30))
+      throw SceneError(where + ".vertices", "zero-area block");
+    if (geometry::edges_self_intersect(b.vertices)) throw SceneError(where + ".vertices", "self-intersecting polygon");
+    if (area < 0) throw SceneError(where + ".vertices", "vertices must be counter-clockwise");
+    if (!geometry::is_convex_ccw(b.vertices)) throw SceneError(where + ".vertices", "the polygon is not convex");
+    any_free = any_free || !b.fixed;
+  }
+  if (!any_free) throw SceneError(s + "blocks", "every block is fixed: nothing can move");
+
+  // Blocks must not overlap at the start (touching is fine): tolerance 1e-9 of the block size.
+  for (std::size_t i = 0; i < blocks.size(); ++i)
+    for (std::size_t j = i + 1; j < blocks.size(); ++j) {
+      const double depth = geometry::overlap_depth(blocks[i].vertices, blocks[j].vertices);
+      if (depth > 1e-7)
+        throw SceneError(s + "blocks", "blocks '" + blocks[i].name + "' and '" + blocks[j].name +
+                                           "' overlap at the start by " + format_value(depth) + " m");
+    }
+
+  const int n = contact.points_per_joint;
+  if (n < 2 || n > 200)
+    throw SceneError(s + "contact.points_per_joint", "must be between 2 and 200, got " + std::to_string(n));
+  require_finite(contact.edge_angle_tolerance, s + "contact.edge_angle_tolerance_deg");
+  if (contact.edge_angle_tolerance <= 0 || contact.edge_angle_tolerance >= std::numbers::pi / 4)
+    throw SceneError(s + "contact.edge_angle_tolerance_deg", "must be in (0, 45) degrees");
+  require_non_negative(contact.search_margin, s + "contact.search_margin");
+
+  require_finite(solver.local_damping, s + "solver.local_damping");
+  if (solver.local_damping < 0 || solver.local_damping >= 1)
+    throw SceneError(s + "solver.local_damping", "must be in [0, 1), got " + format_value(solver.local_damping));
+  require_positive(solver.time_step_safety, s + "solver.time_step_safety");
+  if (solver.time_step_safety > 1)
+    throw SceneError(s + "solver.time_step_safety", "must not exceed 1, got " + format_value(solver.time_step_safety));
+  require_non_negative(solver.time_step, s + "solver.time_step");
+  require_finite(solver.density_scaling, s + "solver.density_scaling");
+  if (solver.density_scaling < 1)
+    throw SceneError(s + "solver.density_scaling", "must be >= 1, got " + format_value(solver.density_scaling));
+  require_positive(solver.equilibrium_ratio, s + "solver.equilibrium_ratio");
+  require_positive(solver.max_equilibrium_time, s + "solver.max_equilibrium_time");
+  require_positive(solver.max_time, s + "solver.max_time");
+  require_positive(solver.collapse_displacement, s + "solver.collapse_displacement");
+  require_positive(solver.max_velocity, s + "solver.max_velocity");
+
+  const Loading& l = loading;
+  if (l.type != "none" && l.type != "point" && l.type != "wall")
+    throw SceneError(s + "loading.type", "must be none, point or wall, got '" + l.type + "'");
+  if (l.type != "none") {
+    if (block_index(l.block) < 0) throw SceneError(s + "loading.block", "unknown block '" + l.block + "'");
+    if (blocks[block_index(l.block)].fixed) throw SceneError(s + "loading.block", "the loaded block '" + l.block + "' is fixed");
+    require_finite(l.point.x(), s + "loading.point");
+    require_finite(l.point.y(), s + "loading.point");
+    require_unit(l.direction, s + "loading.direction");
+    require_positive(l.velocity, s + "loading.velocity");
+    require_positive(l.max_displacement, s + "loading.max_displacement");
+    require_non_negative(l.stiffness, s + "loading.stiffness");
+    require_positive(l.record_interval, s + "loading.record_interval");
+  }
+  for (std::size_t f = 0; f < l.constant_forces.size(); ++f) {
+    const std::string where = s + "loading.constant_forces[" + std::to_string(f) + "]";
+    if (block_index(l.constant_forces[f].block) < 0)
+      throw SceneError(where + ".block", "unknown block '" + l.constant_forces[f].block + "'");
+    require_finite(l.constant_forces[f].force.norm(), where + ".force");
+    require_finite(l.constant_forces[f].point.norm(), where + ".point");
+  }
+  std::set<std::string> gauge_names;
+  for (std::size_t g = 0; g < gauges.size(); ++g) {
+    const std::string where = s + "gauges[" + std::to_string(g) + "]";
+    if (gauges[g].name.empty() || gauges[g].name == "time" || gauges[g].name == "force")
+      throw SceneError(where + ".name", "a gauge needs a name other than 'time' and 'force'");
+    if (!gauge_names.insert(gauges[g].name).second) throw SceneError(where + ".name", "duplicate gauge '" + gauges[g].name + "'");
+    if (block_index(gauges[g].block) < 0) throw SceneError(where + ".block", "unknown block '" + gauges[g].block + "'");
+    require_finite(gauges[g].point.norm(), where + ".point");
+    require_unit(gauges[g].direction, where + ".direction");
+  }
+}
+
+Scene scene_from_json(const json& j, const std::string& source) {
+  Scene scene;
+  const ObjectReader root(j, source);
+  const auto at = [&](const std::string& key) { return source + ": " + key; };
+  scene.name = root.string("name", scene.name);
+  scene.width = root.number("width", scene.width);
+  scene.gravity = root.vec2("gravity", scene.gravity);
+
+  const json& groups = root.required("joint_groups");
+  if (!groups.is_object() || groups.empty()) throw SceneError(at("joint_groups"), "expected an object of joint groups");
+  for (const auto& [group, value] : groups.items()) {
+    const ObjectReader g(value, at("joint_groups." + group));
+    JointMaterial m;
+    m.normal_stiffness = g.number("kn");
+    m.shear_stiffness = g.number("ks");
+    m.friction_angle = g.number("friction_deg") * kDegree;
+    scene.joint_groups[group] = m;
+  }
+  scene.default_joint_group = root.string("default_joint_group", scene.joint_groups.begin()->first);
+  if (root.has("joint_group_rules")) {
+    const json& rules = root.required("joint_group_rules");
+    if (!rules.is_array()) throw SceneError(at("joint_group_rules"), "expected an array");
+    for (std::size_t r = 0; r < rules.size(); ++r) {
+      const ObjectReader rr(rules[r], at("joint_group_rules[" + std::to_string(r) + "]"));
+      const json& labels = rr.required("labels");
+      if (!labels.is_array() || labels.size() != 2)
+        throw SceneError(rr.key_path("labels"), "expected two block labels, got " + labels.dump());
+      scene.joint_group_rules.push_back({ObjectReader::to_string(labels[0], rr.key_path("labels[0]")),
+                                         ObjectReader::to_string(labels[1], rr.key_path("labels[1]")),
+                                         rr.string("orientation", "any"), rr.string("joint_group")});
+    }
+  }
+
+  const json& blocks = root.required("blocks");
+  if (!blocks.is_array()) throw SceneError(at("blocks"), "expected an array of blocks");
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    const ObjectReader b(blocks[i], at("blocks[" + std::to_string(i) + "]"));
+    Block block;
+    block.name = b.string("name");
+    block.label = b.string("label", "");
+    block.density = b.number("density", block.density);
+    block.fixed = b.boolean("fixed", false);
+    block.fixed_rotation = b.boolean("fixed_rotation", false);
+    block.gravity = b.boolean("gravity", true);
+    const json& vertices = b.required("vertices");
+    if (!vertices.is_array()) throw SceneError(b.key_path("vertices"), "expected an array of [x, y]");
+    for (std::size_t v = 0; v < vertices.size(); ++v)
+      block.vertices.push_back(ObjectReader::to_vec2(vertices[v], b.key_path("vertices[" + std::to_string(v) + "]")));
+    scene.blocks.push_back(std::move(block));
+  }
+
+  if (root.has("contact")) {
+    const ObjectReader c(root.required("contact"), at("contact"));
+    scene.contact.points_per_joint = c.integer("points_per_joint", scene.contact.points_per_joint);
+    scene.contact.edge_angle_tolerance =
+        c.number("edge_angle_tolerance_deg", scene.contact.edge_angle_tolerance / kDegree) * kDegree;
+    scene.contact.search_margin = c.number("search_margin", scene.contact.search_margin);
+  }
+  if (root.has("solver")) {
+    const ObjectReader c(root.required("solver"), at("solver"));
+    SolverSettings& sv = scene.solver;
+    sv.local_damping = c.number("local_damping", sv.local_damping);
+    sv.time_step_safety = c.number("time_step_safety", sv.time_step_safety);
+    sv.time_step = c.number("time_step", sv.time_step);
+    sv.density_scaling = c.number("density_scaling", sv.density_scaling);
+    sv.equilibrium_ratio = c.number("equilibrium_ratio", sv.equilibrium_ratio);
+    sv.max_equilibrium_time = c.number("max_equilibrium_time", sv.max_equilibrium_time);
+    sv.max_time = c.number("max_time", sv.max_time);
+    sv.collapse_displacement = c.number("collapse_displacement", sv.collapse_displacement);
+    sv.max_velocity = c.number("max_velocity", sv.max_velocity);
+  }
+  if (root.has("loading")) {
+    const ObjectReader c(root.required("loading"), at("loading"));
+    Loading& l = scene.loading;
+    l.type = c.string("type", l.type);
+    if (l.type != "none") {
+      l.block = c.string("block");
+      l.point = c.vec2("point");
+    }
+    l.direction = c.vec2("direction", l.direction);
+    l.velocity = c.number("velocity", l.velocity);
+    l.max_displacement = c.number("max_displacement", l.max_displacement);
+    l.stiffness = c.number("stiffness", l.stiffness);
+    l.compression_only = c.boolean("compression_only", l.compression_only);
+    l.record_interval = c.number("record_interval", l.record_interval);
+    if (c.has("constant_forces")) {
+      const json& forces = c.required("constant_forces");
+      if (!forces.is_array()) throw SceneError(c.key_path("constant_forces"), "expected an array");
+      for (std::size_t f = 0; f < forces.size(); ++f) {
+        const ObjectReader fr(forces[f], c.key_path("constant_forces[" + std::to_string(f) + "]"));
+        l.constant_forces.push_back({fr.string("block"), fr.vec2("force"), fr.vec2("point")});
+      }
+    }
+  }
+  if (root.has("gauges")) {
+    const json& gauges = root.required("gauges");
+    if (!gauges.is_array()) throw SceneError(at("gauges"), "expected an array");
+    for (std::size_t g = 0; g < gauges.size(); ++g) {
+      const ObjectReader gr(gauges[g], at("gauges[" + std::to_string(g) + "]"));
+      scene.gauges.push_back({gr.string("name"), gr.string("block"), gr.vec2("point"), gr.vec2("direction", Vec2(1, 0))});
+    }
+  }
+  scene.Validate(source);
+  return scene;
+}
+
+json scene_to_json(const Scene& scene) {
+  json j;
+  j["format"] = "demcal-scene";
+  j["version"] = 1;
+  j["name"] = scene.name;
+  j["width"] = scene.width;
+  j["gravity"] = vec2_json(scene.gravity);
+  for (const auto& [group, m] : scene.joint_groups)
+    j["joint_groups"][group] = {{"kn", m.normal_stiffness}, {"ks", m.shear_stiffness},
+                                {"friction_deg", m.friction_angle / kDegree}};
+  j["default_joint_group"] = scene.default_joint_group;
+  j["joint_group_rules"] = json::array();
+  for (const auto& r : scene.joint_group_rules)
+    j["joint_group_rules"].push_back({{"labels", {r.label_a, r.label_b}}, {"orientation", r.orientation},
+                                      {"joint_group", r.joint_group}});
+  j["blocks"] = json::array();
+  for (const Block& b : scene.blocks) {
+    json vertices = json::array();
+    for (const Vec2& v : b.vertices) vertices.push_back(vec2_json(v));
+    json block = {{"name", b.name}, {"label", b.label}, {"density", b.density}, {"vertices", vertices}};
+    if (b.fixed) block["fixed"] = true;
+    if (b.fixed_rotation) block["fixed_rotation"] = true;
+    if (!b.gravity) block["gravity"] = false;
+    j["blocks"].push_back(block);
+  }
+  j["contact"] = {{"points_per_joint", scene.contact.points_per_joint},
+                  {"edge_angle_tolerance_deg", scene.contact.edge_angle_tolerance / kDegree},
+                  {"search_margin", scene.contact.search_margin}};
+  const SolverSettings& sv = scene.solver;
+  j["solver"] = {{"local_damping", sv.local_damping},         {"time_step_safety", sv.time_step_safety},
+                 {"time_step", sv.time_step},                 {"density_scaling", sv.density_scaling},
+                 {"equilibrium_ratio", sv.equilibrium_ratio}, {"max_equilibrium_time", sv.max_equilibrium_time},
+                 {"max_time", sv.max_time},                   {"collapse_displacement", sv.collapse_displacement},
+                 {"max_velocity", sv.max_velocity}};
+  const Loading& l = scene.loading;
+  j["loading"] = {{"type", l.type}};
+  if (l.type != "none")
+    j["loading"].update({{"block", l.block}, {"point", vec2_json(l.point)}, {"direction", vec2_json(l.direction)},
+                         {"velocity", l.velocity}, {"max_displacement", l.max_displacement},
+                         {"stiffness", l.stiffness}, {"compression_only", l.compression_only},
+                         {"record_interval", l.record_interval}});
+  if (!l.constant_forces.empty()) {
+    j["loading"]["constant_forces"] = json::array();
+    for (const auto& f : l.constant_forces)
+      j["loading"]["constant_forces"].push_back({{"block", f.block}, {"force", vec2_json(f.force)}, {"point", vec2_json(f.point)}});
+  }
+  j["gauges"] = json::array();
+  for (const Gauge& g : scene.gauges)
+    j["gauges"].push_back({{"name", g.name}, {"block", g.block}, {"point", vec2_json(g.point)},
+                           {"direction", vec2_json(g.direction)}});
+  return j;
+}
+
+Scene load_scene(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw SceneError(path, "cannot open the scene file");
+  json j;
+  try {
+    j = json::parse(in);
+  } catch (const json::parse_error& e) {
+    throw SceneError(path, std::string("invalid JSON: ") + e.what());
+  }
+  return scene_from_json(j, path);
+}
+
+void save_scene(const Scene& scene, const std::string& path) {
+  std::ofstream out(path);
+  if (!out) throw SceneError(path, "cannot write the scene file");
+  out << scene_to_json(scene).dump(2) << "\n";
+  if (!out) throw SceneError(path, "writing the scene file failed");
+}
+
+std::string scene_hash(const Scene& scene) {
+  const std::string text = scene_to_json(scene).dump();
+  std::uint64_t h = 1469598103934665603ull;  // FNV-1a 64
+  for (unsigned char c : text) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  std::ostringstream s;
+  s << std::hex << std::setw(16) << std::setfill('0') << h;
+  return s.str();
+}
+
+namespace {
+
+// Splits "group.kn" into ("group", "kn"); a bare "kn" gives ("", "kn").
+std::pair<std::string, std::string> split_parameter(const std::string& name) {
+  const auto dot = name.rfind('.');
+  if (dot == std::string::npos) return {"", name};
+  return {name.substr(0, dot), name.substr(dot + 1)};
+}
+
+double& material_field(JointMaterial& m, const std::string& field, const std::string& name) {
+  if (field == "kn") return m.normal_stiffness;
+  if (field == "ks") return m.shear_stiffness;
+  if (field == "friction_deg") return m.friction_angle;
+  throw SceneError("parameter '" + name + "'", "unknown parameter (expected kn, ks or friction_deg, optionally as <joint group>.<name>)");
+}
+
+}  // namespace
+
+void set_parameter(Scene& scene, const std::string& name, double value) {
+  const auto [group, field] = split_parameter(name);
+  JointMaterial probe;
+  material_field(probe, field, name);  // rejects an unknown field name before anything changes
+  if (!std::isfinite(value)) throw SceneError("parameter '" + name + "'", "value is not finite");
+  const double stored = field == "friction_deg" ? value * kDegree : value;
+  if (group.empty()) {
+    for (auto& [g, m] : scene.joint_groups) material_field(m, field, name) = stored;
+    return;
+  }
+  auto it = scene.joint_groups.find(group);
+  if (it == scene.joint_groups.end())
+    throw SceneError("parameter '" + name + "'", "unknown joint group '" + group + "'");
+  material_field(it->second, field, name) = stored;
+}
+
+double get_parameter(const Scene& scene, const std::string& name) {
+  auto [group, field] = split_parameter(name);
+  if (group.empty()) {
+    if (scene.joint_groups.empty()) throw SceneError("parameter '" + name + "'", "the scene has no joint groups");
+    group = scene.default_joint_group.empty() ? scene.joint_groups.begin()->first : scene.default_joint_group;
+  }
+  auto it = scene.joint_groups.find(group);
+  if (it == scene.joint_groups.end())
+    throw SceneError("parameter '" + name + "'", "unknown joint group '" + group + "'");
+  JointMaterial m = it->second;
+  const double v = material_field(m, field, name);
+  return field == "friction_deg" ? v / kDegree : v;
+}
+
+std::vector<std::string> parameter_names(const Scene& scene) {
+  std::vector<std::string> names = {"kn", "ks", "friction_deg"};
+  for (const auto& [group, m] : scene.joint_groups)
+    for (const char* field : {"kn", "ks", "friction_deg"}) names.push_back(group + "." + field);
+  return names;
+}
+
+}  // namespace demcal::dem

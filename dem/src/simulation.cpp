@@ -1,0 +1,668 @@
+#include "demcal/dem/simulation.hpp"
+
+#include "contact_law.hpp"
+#include "geometry.hpp"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+
+namespace demcal::dem {
+
+std::string to_string(RunStatus status) {
+  switch (status) {
+    case RunStatus::completed: return "completed";
+    case RunStatus::collapsed: return "collapsed";
+    case RunStatus::unstable: return "unstable";
+    case RunStatus::step_limit: return "step_limit";
+    case RunStatus::cancelled: return "cancelled";
+  }
+  return "unknown";
+}
+
+namespace {
+
+using geometry::cross;
+using geometry::perp;
+
+struct Body {
+  std::string name, label;
+  std::vector<Vec2> local;  // vertices relative to the centroid at angle 0
+  std::vector<Vec2> world;
+  Vec2 start_position = Vec2::Zero();
+  Vec2 position = Vec2::Zero();
+  double angle = 0;
+  Vec2 velocity = Vec2::Zero();
+  double angular_velocity = 0;
+  Vec2 force = Vec2::Zero();
+  double torque = 0;
+  double mass = 0, inertia = 0;                 // true values
+  double inertial_mass = 0, inertial_inertia = 0;  // density-scaled
+  Vec2 weight = Vec2::Zero();
+  bool fixed = false, fixed_rotation = false;
+  double radius = 0;  // largest vertex distance from the centroid
+  Vec2 box_min = Vec2::Zero(), box_max = Vec2::Zero();
+
+  Vec2 to_local(const Vec2& world_point) const {
+    return Eigen::Rotation2Dd(-angle) * (world_point - position);
+  }
+  Vec2 to_world(const Vec2& local_point) const { return position + Eigen::Rotation2Dd(angle) * local_point; }
+  Vec2 velocity_at(const Vec2& world_point) const {
+    return velocity + angular_velocity * perp(world_point - position);
+  }
+  void update_world() {
+    const Eigen::Rotation2Dd r(angle);
+    const Eigen::Matrix2d m = r.toRotationMatrix();
+    box_min = Vec2::Constant(std::numeric_limits<double>::infinity());
+    box_max = -box_min;
+    for (std::size_t i = 0; i < local.size(); ++i) {
+      world[i] = position + m * local[i];
+      box_min = box_min.cwiseMin(world[i]);
+      box_max = box_max.cwiseMax(world[i]);
+    }
+  }
+};
+
+// A point fixed to a body (gauge or actuator attachment).
+struct AttachedPoint {
+  int body = -1;
+  Vec2 local = Vec2::Zero();
+};
+
+// Persistent state of one contacting pair (a joint).
+struct Contact {
+  int group = 0;
+  bool ref_on_a = true;
+  bool corner = false;
+  bool active = false;  // within the search margin in the previous step (shear history valid)
+  bool seen = false;    // within the search margin in this step
+  std::vector<double> shear;  // stored shear force per node (N)
+  std::vector<double> gap;    // last gap per node (m), for reports
+  // Joint history since the gauges were zeroed.
+  double slip = 0;
+  bool ever_touched = false;
+};
+
+struct GroupLaw {
+  std::string name;
+  JointMaterial material;
+  MohrCoulombLaw law;
+};
+
+class Engine {
+ public:
+  explicit Engine(const Scene& scene) : scene_(scene) {
+    build_bodies();
+    build_groups();
+    points_ = scene_.contact.points_per_joint;
+    cos_edge_tolerance_ = std::cos(scene_.contact.edge_angle_tolerance);
+    margin_ = scene_.contact.search_margin;
+    setup_loading();
+    dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
+  }
+
+  Recording run(const RunControl& control);
+
+ private:
+  void build_bodies();
+  void build_groups();
+  void setup_loading();
+  double critical_time_step() const;
+  int group_for(const Body& a, const Body& b, const Vec2& normal) const;
+  void compute_forces();
+  void process_pair(int ia, int ib);
+  void integrate();
+  double unbalanced_ratio() const;
+  double actuator_force() const;
+  RunStatus check_state(std::string& message) const;
+  void zero_gauges();
+  void record_row(double load_time, double force);
+  void finish(Recording& rec) const;
+
+  const Scene& scene_;
+  std::vector<Body> bodies_;
+  std::vector<GroupLaw> groups_;
+  std::unordered_map<std::uint64_t, Contact> contacts_;
+  std::vector<std::pair<int, int>> pairs_;
+  std::vector<int> order_;
+  int points_ = 15;
+  double cos_edge_tolerance_ = 1;
+  double margin_ = 0;
+  double dt_ = 0;
+  double max_weight_ = 0;
+  bool loading_stage_ = false;
+  long node_updates_ = 0;
+
+  // Loading.
+  bool has_actuator_ = false;
+  AttachedPoint actuator_point_;
+  Vec2 actuator_anchor_ = Vec2::Zero();  // at the start of loading
+  Vec2 actuator_direction_ = Vec2(0, -1);
+  double actuator_stiffness_ = 0;
+  double actuator_travel_ = 0;
+  struct AppliedForce {
+    AttachedPoint at;
+    Vec2 force;
+  };
+  std::vector<AppliedForce> constant_forces_;
+  std::vector<AttachedPoint> gauge_points_;
+  std::vector<Vec2> gauge_zero_;
+  std::vector<double> zero_angles_;
+  Recording rec_;
+};
+
+void Engine::build_bodies() {
+  const double scaling = scene_.solver.density_scaling;
+  for (const Block& b : scene_.blocks) {
+    Body body;
+    body.name = b.name;
+    body.label = b.label;
+    const Vec2 c = geometry::centroid(b.vertices);
+    for (const Vec2& v : b.vertices) {
+      body.local.push_back(v - c);
+      body.radius = std::max(body.radius, (v - c).norm());
+    }
+    body.world = b.vertices;
+    body.position = body.start_position = c;
+    body.mass = b.density * scene_.width * geometry::signed_area(b.vertices);
+    body.inertia = b.density * scene_.width * geometry::polar_moment(b.vertices);
+    body.inertial_mass = body.mass * scaling;
+    body.inertial_inertia = body.inertia * scaling;
+    body.weight = b.gravity ? Vec2(body.mass * scene_.gravity) : Vec2(Vec2::Zero());
+    body.fixed = b.fixed;
+    body.fixed_rotation = b.fixed_rotation;
+    body.update_world();
+    if (!body.fixed) max_weight_ = std::max(max_weight_, body.mass * scene_.gravity.norm());
+    bodies_.push_back(std::move(body));
+  }
+}
+
+void Engine::build_groups() {
+  for (const auto& [name, material] : scene_.joint_groups) groups_.push_back({name, material, MohrCoulombLaw(material)});
+}
+
+void Engine::setup_loading() {
+  const auto attach = [&](const std::string& block, const Vec2& world_point) {
+    AttachedPoint p;
+    p.body = scene_.block_index(block);
+    p.local = bodies_[p.body].to_local(world_point);
+    return p;
+  };
+  for (const auto& f : scene_.loading.constant_forces) constant_forces_.push_back({attach(f.block, f.point), f.force});
+  for (const Gauge& g : scene_.gauges) gauge_points_.push_back(attach(g.block, g.point));
+  if (scene_.loading.type == "none") return;
+  has_actuator_ = true;
+  actuator_point_ = attach(scene_.loading.block, scene_.loading.point);
+  actuator_direction_ = scene_.loading.direction;
+  actuator_stiffness_ = scene_.loading.stiffness;
+  if (actuator_stiffness_ <= 0) {
+    double kn = 0, longest = 0;
+    for (const auto& g : groups_) kn = std::max(kn, g.material.normal_stiffness);
+    const Body& b = bodies_[actuator_point_.body];
+    for (std::size_t i = 0; i < b.local.size(); ++i)
+      longest = std::max(longest, (b.local[(i + 1) % b.local.size()] - b.local[i]).norm());
+    actuator_stiffness_ = kn * scene_.width * longest;
+  }
+  // Weight carried by a loading device without gravity still counts for the equilibrium ratio.
+  for (const auto& f : constant_forces_) max_weight_ = std::max(max_weight_, f.force.norm());
+}
+
+// Upper bound of the highest natural frequency per body: every face in full contact with the
+// stiffest group (trace of the 3x3 stiffness over the inertia), doubled for two-body coupling.
+double Engine::critical_time_step() const {
+  double kn = 0, ks = 0;
+  for (const auto& g : groups_) {
+    kn = std::max(kn, g.material.normal_stiffness);
+    ks = std::max(ks, g.material.shear_stiffness);
+  }
+  double omega_squared = 0;
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    const Body& b = bodies_[i];
+    if (b.fixed) continue;
+    double k_translation = 0, k_rotation = 0;
+    const std::size_t n = b.local.size();
+    for (std::size_t e = 0; e < n; ++e) {
+      const Vec2 r1 = b.local[e], r2 = b.local[(e + 1) % n];
+      const double length = (r2 - r1).norm();
+      const Vec2 t = (r2 - r1) / length, normal(t.y(), -t.x());
+      const double c = cross(r1, normal);  // moment arm of a normal force at the edge start
+      k_translation += scene_.width * length * (kn + ks);
+      k_rotation += scene_.width * (kn * (c * c * length - c * length * length + length * length * length / 3) +
+                                    ks * std::pow(cross(r1, t), 2) * length);
+    }
+    if (has_actuator_ && static_cast<int>(i) == actuator_point_.body) {
+      k_translation += actuator_stiffness_;
+      k_rotation += actuator_stiffness_ * std::pow(cross(actuator_point_.local, actuator_direction_), 2);
+    }
+    double w2 = k_translation / b.inertial_mass;
+    if (!b.fixed_rotation) w2 += k_rotation / b.inertial_inertia;
+    omega_squared = std::max(omega_squared, 2 * w2);
+  }
+  return 2.0 / std::sqrt(omega_squared);
+}
+
+int Engine::group_for(const Body& a, const Body& b, const Vec2& normal) const {
+  const bool horizontal = std::abs(normal.y()) >= std::abs(normal.x());
+  for (const auto& rule : scene_.joint_group_rules) {
+    const bool labels = (rule.label_a == a.label && rule.label_b == b.label) ||
+                        (rule.label_a == b.label && rule.label_b == a.label);
+    const bool orientation = rule.orientation == "any" || (rule.orientation == "horizontal") == horizontal;
+    if (labels && orientation) {
+      for (std::size_t g = 0; g < groups_.size(); ++g)
+        if (groups_[g].name == rule.joint_group) return static_cast<int>(g);
+    }
+  }
+  for (std::size_t g = 0; g < groups_.size(); ++g)
+    if (groups_[g].name == scene_.default_joint_group) return static_cast<int>(g);
+  return 0;
+}
+
+// Largest separation of polygon q from the edges of polygon p, and the edge that gives it.
+static std::pair<double, int> max_separation(const std::vector<Vec2>& p, const std::vector<Vec2>& q) {
+  double best = -std::numeric_limits<double>::infinity();
+  int best_edge = 0;
+  const int n = static_cast<int>(p.size());
+  for (int e = 0; e < n; ++e) {
+    const Vec2 d = p[(e + 1) % n] - p[e];
+    const Vec2 normal = Vec2(d.y(), -d.x()) / d.norm();
+    double s = std::numeric_limits<double>::infinity();
+    for (const Vec2& v : q) s = std::min(s, (v - p[e]).dot(normal));
+    if (s > best) {
+      best = s;
+      best_edge = e;
+    }
+  }
+  return {best, best_edge};
+}
+
+void Engine::process_pair(int ia, int ib) {
+  Body& a = bodies_[ia];
+  Body& b = bodies_[ib];
+  const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
+  const auto [sep_a, edge_a] = max_separation(a.world, b.world);
+  if (sep_a > margin_) return;
+  const auto [sep_b, edge_b] = max_separation(b.world, a.world);
+  if (sep_b > margin_) return;
+
+  auto it = contacts_.find(key);
+  // Reference face: the polygon whose face separates more; hysteresis keeps the previous choice
+  // while the two are within a small tolerance (near-parallel faces would otherwise flip).
+  const double tolerance = 1e-3 * margin_ + 1e-12;
+  bool ref_on_a = sep_a >= sep_b;
+  if (it != contacts_.end() && it->second.active)
+    ref_on_a = it->second.ref_on_a ? sep_a >= sep_b - tolerance : sep_a > sep_b + tolerance;
+
+  const Body& ref = ref_on_a ? a : b;
+  const Body& inc = ref_on_a ? b : a;
+  const int ref_edge = ref_on_a ? edge_a : edge_b;
+  const int nr = static_cast<int>(ref.world.size()), ni = static_cast<int>(inc.world.size());
+  const Vec2 r1 = ref.world[ref_edge], r2 = ref.world[(ref_edge + 1) % nr];
+  const double ref_length = (r2 - r1).norm();
+  const Vec2 tr = (r2 - r1) / ref_length;
+  const Vec2 normal(tr.y(), -tr.x());  // outward from the reference polygon
+
+  int inc_edge = 0;
+  double most_opposed = std::numeric_limits<double>::infinity();
+  for (int e = 0; e < ni; ++e) {
+    const Vec2 d = inc.world[(e + 1) % ni] - inc.world[e];
+    const double c = Vec2(d.y(), -d.x()).dot(normal) / d.norm();
+    if (c < most_opposed) {
+      most_opposed = c;
+      inc_edge = e;
+    }
+  }
+  const bool edge_contact = -most_opposed >= cos_edge_tolerance_;
+
+  // Node positions along the reference face (coordinate s from r1 along tr), gaps and lengths.
+  thread_local std::vector<double> s_nodes, gaps, lengths;
+  s_nodes.clear();
+  gaps.clear();
+  lengths.clear();
+  if (edge_contact) {
+    const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[(inc_edge + 1) % ni];
+    const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
+    const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(ref_length, std::max(s1, s2));
+    if (hi - lo <= 1e-9 * ref_length) return;
+    const double g1 = (q1 - r1).dot(normal), g2 = (q2 - r1).dot(normal);
+    const double spacing = (hi - lo) / (points_ - 1);
+    for (int k = 0; k < points_; ++k) {
+      const double s = lo + k * spacing;
+      const double u = (s - s1) / (s2 - s1);
+      s_nodes.push_back(s);
+      gaps.push_back(g1 + u * (g2 - g1));
+      lengths.push_back((k == 0 || k == points_ - 1) ? 0.5 * spacing : spacing);
+    }
+  } else {
+    // Corner against face: the deepest vertex of the incident polygon, if it lies over the face.
+    int deepest = 0;
+    double depth = std::numeric_limits<double>::infinity();
+    for (int v = 0; v < ni; ++v) {
+      const double g = (inc.world[v] - r1).dot(normal);
+      if (g < depth) {
+        depth = g;
+        deepest = v;
+      }
+    }
+    const double s = (inc.world[deepest] - r1).dot(tr);
+    if (s < 0 || s > ref_length) return;
+    const double shorter = std::min((inc.world[(deepest + 1) % ni] - inc.world[deepest]).norm(),
+                                    (inc.world[(deepest + ni - 1) % ni] - inc.world[deepest]).norm());
+    s_nodes.push_back(s);
+    gaps.push_back(depth);
+    lengths.push_back(shorter / (2.0 * (points_ - 1)));
+  }
+
+  const Vec2 normal_ab = ref_on_a ? normal : Vec2(-normal);
+  const Vec2 tangent_ab = perp(normal_ab);
+  if (it == contacts_.end()) {
+    Contact c;
+    c.group = group_for(a, b, normal_ab);
+    it = contacts_.emplace(key, std::move(c)).first;
+  }
+  Contact& contact = it->second;
+  const int count = static_cast<int>(s_nodes.size());
+  if (!contact.active || contact.corner != !edge_contact || static_cast<int>(contact.shear.size()) != count) {
+    contact.shear.assign(count, 0.0);
+  }
+  contact.seen = true;
+  contact.corner = !edge_contact;
+  contact.ref_on_a = ref_on_a;
+  contact.gap.resize(count);
+
+  const MohrCoulombLaw& law = groups_[contact.group].law;
+  double slip_weighted = 0, length_total = 0;
+  bool touching = false;
+  for (int k = 0; k < count; ++k) {
+    // Nodes are stored in the order of increasing coordinate along tangent_ab.
+    const int slot = ref_on_a ? k : count - 1 - k;
+    const double gap = gaps[k];
+    contact.gap[slot] = gap;
+    const Vec2 point = r1 + s_nodes[k] * tr + 0.5 * gap * normal;
+    NodeKinematics kin;
+    kin.penetration = -gap;
+    kin.area = lengths[k] * scene_.width;
+    if (kin.penetration > 0) kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(tangent_ab) * dt_;
+    const NodeForces f = law.evaluate(kin, contact.shear[slot]);
+    ++node_updates_;
+    if (f.normal == 0) continue;
+    touching = true;
+    const Vec2 force_on_b = f.normal * normal_ab + f.shear * tangent_ab;
+    b.force += force_on_b;
+    b.torque += cross(point - b.position, force_on_b);
+    a.force -= force_on_b;
+    a.torque -= cross(point - a.position, force_on_b);
+    slip_weighted += f.plastic_slip * lengths[k];
+    length_total += lengths[k];
+  }
+  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
+  if (touching && loading_stage_) contact.ever_touched = true;
+}
+
+void Engine::compute_forces() {
+  for (Body& b : bodies_) {
+    b.force = b.weight;
+    b.torque = 0;
+  }
+  for (const auto& f : constant_forces_) {
+    Body& b = bodies_[f.at.body];
+    const Vec2 p = b.to_world(f.at.local);
+    b.force += f.force;
+    b.torque += cross(p - b.position, f.force);
+  }
+  if (has_actuator_ && loading_stage_) {
+    Body& b = bodies_[actuator_point_.body];
+    const Vec2 p = b.to_world(actuator_point_.local);
+    const Vec2 force = actuator_force() * actuator_direction_;
+    b.force += force;
+    b.torque += cross(p - b.position, force);
+  }
+
+  // Broad phase: sweep along x over bounding boxes grown by the search margin.
+  order_.resize(bodies_.size());
+  for (std::size_t i = 0; i < bodies_.size(); ++i) order_[i] = static_cast<int>(i);
+  std::sort(order_.begin(), order_.end(), [&](int i, int j) {
+    return bodies_[i].box_min.x() < bodies_[j].box_min.x() || (bodies_[i].box_min.x() == bodies_[j].box_min.x() && i < j);
+  });
+  pairs_.clear();
+  for (std::size_t p = 0; p < order_.size(); ++p) {
+    const Body& bi = bodies_[order_[p]];
+    for (std::size_t q = p + 1; q < order_.size(); ++q) {
+      const Body& bj = bodies_[order_[q]];
+      if (bj.box_min.x() > bi.box_max.x() + margin_) break;
+      if (bi.fixed && bj.fixed) continue;
+      if (bj.box_min.y() > bi.box_max.y() + margin_ || bi.box_min.y() > bj.box_max.y() + margin_) continue;
+      pairs_.emplace_back(std::min(order_[p], order_[q]), std::max(order_[p], order_[q]));
+    }
+  }
+  std::sort(pairs_.begin(), pairs_.end());
+  for (auto& [key, c] : contacts_) c.seen = false;
+  for (const auto& [i, j] : pairs_) process_pair(i, j);
+  for (auto& [key, c] : contacts_) {
+    c.active = c.seen;
+    if (!c.active) std::fill(c.gap.begin(), c.gap.end(), std::numeric_limits<double>::infinity());
+  }
+}
+
+double Engine::actuator_force() const {
+  const Body& b = bodies_[actuator_point_.body];
+  const Vec2 anchor = actuator_anchor_ + actuator_travel_ * actuator_direction_;
+  const double extension = (anchor - b.to_world(actuator_point_.local)).dot(actuator_direction_);
+  const double force = actuator_stiffness_ * extension;
+  return scene_.loading.compression_only ? std::max(0.0, force) : force;
+}
+
+// Central differences with local (non-viscous) damping per degree of freedom:
+// F_damped = F - alpha |F| sign(v).
+void Engine::integrate() {
+  const double alpha = scene_.solver.local_damping;
+  const auto damped = [alpha](double f, double v) { return v == 0 ? f : f - alpha * std::abs(f) * (v > 0 ? 1 : -1); };
+  for (Body& b : bodies_) {
+    if (b.fixed) continue;
+    b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
+    b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
+    if (!b.fixed_rotation) b.angular_velocity += dt_ * damped(b.torque, b.angular_velocity) / b.inertial_inertia;
+    b.position += dt_ * b.velocity;
+    b.angle += dt_ * b.angular_velocity;
+    b.update_world();
+  }
+}
+
+double Engine::unbalanced_ratio() const {
+  double worst = 0;
+  for (const Body& b : bodies_) {
+    if (b.fixed) continue;
+    worst = std::max(worst, b.force.norm());
+    if (!b.fixed_rotation) worst = std::max(worst, std::abs(b.torque) / b.radius);
+  }
+  return max_weight_ > 0 ? worst / max_weight_ : worst;
+}
+
+RunStatus Engine::check_state(std::string& message) const {
+  for (const Body& b : bodies_) {
+    if (b.fixed) continue;
+    if (!b.position.allFinite() || !std::isfinite(b.angle) || !b.velocity.allFinite()) {
+      message = "non-finite state of block '" + b.name + "'";
+      return RunStatus::unstable;
+    }
+    const double speed = b.velocity.norm() + std::abs(b.angular_velocity) * b.radius;
+    if (speed > scene_.solver.max_velocity) {
+      message = "block '" + b.name + "' exceeded max_velocity (" + std::to_string(speed) + " m/s)";
+      return RunStatus::unstable;
+    }
+    if ((b.position - b.start_position).norm() > scene_.solver.collapse_displacement) {
+      message = "block '" + b.name + "' moved more than collapse_displacement";
+      return RunStatus::collapsed;
+    }
+  }
+  return RunStatus::completed;
+}
+
+void Engine::zero_gauges() {
+  gauge_zero_.clear();
+  for (const auto& g : gauge_points_) gauge_zero_.push_back(bodies_[g.body].to_world(g.local));
+  // Self-weight runs report joint rotations from the start; loaded runs from the zeroed state.
+  zero_angles_.assign(bodies_.size(), 0.0);
+  if (has_actuator_)
+    for (std::size_t i = 0; i < bodies_.size(); ++i) zero_angles_[i] = bodies_[i].angle;
+  if (has_actuator_) actuator_anchor_ = bodies_[actuator_point_.body].to_world(actuator_point_.local);
+}
+
+void Engine::record_row(double load_time, double force) {
+  rec_.time.push_back(load_time);
+  rec_.force.push_back(force);
+  for (std::size_t g = 0; g < gauge_points_.size(); ++g) {
+    const Vec2 p = bodies_[gauge_points_[g].body].to_world(gauge_points_[g].local);
+    rec_.gauge_values[g].push_back((p - gauge_zero_[g]).dot(scene_.gauges[g].direction));
+  }
+}
+
+Recording Engine::run(const RunControl& control) {
+  const auto started = std::chrono::steady_clock::now();
+  rec_ = Recording{};
+  rec_.time_step = dt_;
+  for (const Gauge& g : scene_.gauges) rec_.gauge_names.push_back(g.name);
+  rec_.gauge_values.assign(scene_.gauges.size(), {});
+  const SolverSettings& sv = scene_.solver;
+  const bool loaded = has_actuator_;
+  const double gravity_limit = loaded ? sv.max_equilibrium_time : std::min(sv.max_equilibrium_time, sv.max_time);
+  // Equilibrium must hold for a stretch of steps: a single body swinging through its rest
+  // position has zero force for an instant.
+  const long settle_steps = 100;
+
+  double time = 0;
+  long steps = 0, below = 0;
+  RunStatus status = RunStatus::completed;
+  std::string message;
+  const auto stopped = [&]() {
+    if (control.cancel && (steps & 255) == 0 && control.cancel->load(std::memory_order_relaxed)) {
+      status = RunStatus::cancelled;
+      message = "cancelled by the caller";
+      return true;
+    }
+    status = check_state(message);
+    return status != RunStatus::completed;
+  };
+
+  // Stage 1: self-weight to equilibrium.
+  bool equilibrium = false;
+  while (!stopped()) {
+    compute_forces();
+    below = unbalanced_ratio() < sv.equilibrium_ratio ? below + 1 : 0;
+    if (below >= settle_steps) {
+      equilibrium = true;
+      break;
+    }
+    if (time >= gravity_limit) break;
+    integrate();
+    time += dt_;
+    ++steps;
+  }
+  rec_.gravity_steps = steps;
+  if (status == RunStatus::completed && !equilibrium) {
+    status = RunStatus::step_limit;
+    message = "no equilibrium under self-weight within " + std::to_string(gravity_limit) +
+              " s (unbalanced force ratio " + std::to_string(unbalanced_ratio()) + ")";
+  }
+  zero_gauges();
+  if (status == RunStatus::completed && !loaded) message = "equilibrium under self-weight after " + std::to_string(time) + " s";
+
+  // Stage 2: displacement-controlled loading.
+  if (status == RunStatus::completed && loaded) {
+    loading_stage_ = true;
+    const Loading& l = scene_.loading;
+    double load_time = 0, next_record = 0;
+    while (true) {
+      actuator_travel_ = std::min(l.velocity * load_time, l.max_displacement);
+      compute_forces();
+      if (actuator_travel_ >= next_record - 1e-15) {
+        record_row(load_time, actuator_force());
+        next_record += l.record_interval;
+      }
+      if (actuator_travel_ >= l.max_displacement) {
+        message = "target displacement reached";
+        break;
+      }
+      if (time >= sv.max_time) {
+        status = RunStatus::step_limit;
+        message = "max_time of " + std::to_string(sv.max_time) + " s reached";
+        break;
+      }
+      integrate();
+      time += dt_;
+      load_time += dt_;
+      ++steps;
+      if (stopped()) break;
+    }
+  }
+  rec_.status = status;
+  rec_.message = message;
+  rec_.steps = steps;
+  rec_.contact_point_updates = node_updates_;
+  finish(rec_);
+  rec_.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return std::move(rec_);
+}
+
+void Engine::finish(Recording& rec) const {
+  rec.peak_force = rec.force.empty() ? 0 : *std::max_element(rec.force.begin(), rec.force.end());
+  for (const Body& b : bodies_) {
+    BlockState s;
+    s.name = b.name;
+    s.vertices = b.world;
+    s.displacement = b.position - b.start_position;
+    s.rotation = b.angle;
+    s.fixed = b.fixed;
+    if (!b.fixed) rec.max_block_displacement = std::max(rec.max_block_displacement, s.displacement.norm());
+    rec.final_blocks.push_back(std::move(s));
+  }
+  std::vector<std::pair<std::uint64_t, const Contact*>> sorted;
+  for (const auto& [key, c] : contacts_) sorted.emplace_back(key, &c);
+  std::sort(sorted.begin(), sorted.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+  for (const auto& [key, c] : sorted) {
+    const int ia = static_cast<int>(key >> 32), ib = static_cast<int>(key & 0xffffffffu);
+    if (!c->ever_touched && !loading_stage_) {
+      // Self-weight runs report every joint that carries load at the end.
+      bool carrying = false;
+      for (double g : c->gap) carrying = carrying || g < 0;
+      if (!carrying) continue;
+    } else if (!c->ever_touched) {
+      continue;
+    }
+    JointReport j;
+    j.name = bodies_[ia].name + "/" + bodies_[ib].name;
+    j.joint_group = groups_[c->group].name;
+    int open = 0;
+    for (double g : c->gap) open += g > 0;
+    j.open_fraction = c->gap.empty() ? 1.0 : double(open) / c->gap.size();
+    j.rotation = (bodies_[ib].angle - zero_angles_[ib]) - (bodies_[ia].angle - zero_angles_[ia]);
+    j.slip = c->slip;
+    rec.joints.push_back(std::move(j));
+  }
+  // A hinge or a sliding joint is one of the mechanism's dominant joints: at least a quarter of the
+  // largest rotation (slip) of the run, and above an absolute floor that ignores elastic motion.
+  double max_rotation = 0, max_slip = 0;
+  for (const JointReport& j : rec.joints) {
+    max_rotation = std::max(max_rotation, std::abs(j.rotation));
+    max_slip = std::max(max_slip, j.slip);
+  }
+  for (JointReport& j : rec.joints) {
+    j.hinge = j.open_fraction >= 0.25 && std::abs(j.rotation) >= std::max(1e-3, 0.25 * max_rotation);
+    j.sliding = j.slip >= std::max(2e-4, 0.25 * max_slip);
+    if (j.hinge) rec.hinges.push_back(j.name);
+    if (j.sliding) rec.sliding_joints.push_back(j.name);
+  }
+}
+
+}  // namespace
+
+Recording simulate(const Scene& scene, const RunControl& control) {
+  scene.Validate(scene.name);
+  Engine engine(scene);
+  return engine.run(control);
+}
+
+}  // namespace demcal::dem

@@ -1,0 +1,68 @@
+// `demcal scene arch|wall [flags] -o scene.json`: write a generated scene.
+#include "command_registry.hpp"
+
+#include "demcal/dem/generators.hpp"
+
+#include <iostream>
+
+namespace {
+
+using namespace demcal::dem;
+
+void setup_scene(CLI::App& app) {
+  auto* scene = app.add_subcommand("scene", "Generate a scene JSON (reference arch or dry-joint wall)");
+  scene->require_subcommand(1);
+
+  static ArchOptions arch;
+  static std::string arch_out;
+  auto* a = scene->add_subcommand("arch", "Segmental arch on fixed abutments (defaults: the reference arch)");
+  a->add_option("--span", arch.span, "Clear span at the intrados (m)")->capture_default_str();
+  a->add_option("--rise", arch.rise, "Clear rise at the intrados (m)")->capture_default_str();
+  a->add_option("--thickness", arch.thickness, "Radial thickness (m)")->capture_default_str();
+  a->add_option("--width", arch.width, "Out-of-plane width (m)")->capture_default_str();
+  a->add_option("--voussoirs", arch.voussoirs, "Blocks in the ring, keystone included")->capture_default_str();
+  a->add_option("--density", arch.density, "Unit density (kg/m^3)")->capture_default_str();
+  a->add_option("--kn", arch.kn, "Joint normal stiffness (Pa/m)")->capture_default_str();
+  a->add_option("--ks", arch.ks, "Joint shear stiffness (Pa/m)")->capture_default_str();
+  a->add_option("--friction-deg", arch.friction_deg, "Joint friction angle (degrees)")->capture_default_str();
+  a->add_option("--contacts-per-joint", arch.contacts_per_joint, "Contact points along a joint")->capture_default_str();
+  a->add_option("--load-voussoir", arch.load_voussoir, "Loaded voussoir, 1-based from the left")->capture_default_str();
+  a->add_option("--velocity", arch.velocity, "Loading velocity (m/s)")->capture_default_str();
+  a->add_option("--max-displacement", arch.max_displacement, "Actuator travel (m)")->capture_default_str();
+  a->add_option("--load", arch.load, "point | none (self-weight only)")->capture_default_str();
+  a->add_option("--max-time", arch.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
+  a->add_option("-o,--output", arch_out, "Scene file to write")->required();
+  a->callback([] {
+    save_scene(make_arch(arch), arch_out);
+    std::cout << "wrote " << arch_out << "\n";
+  });
+
+  static WallOptions wall;
+  static std::string wall_out;
+  auto* w = scene->add_subcommand("wall", "Dry-joint running-bond wall under pre-compression and shear");
+  w->add_option("--height", wall.height, "Wall height (m)")->capture_default_str();
+  w->add_option("--length", wall.length, "Wall length (m)")->capture_default_str();
+  w->add_option("--thickness", wall.thickness, "Wall thickness, out of plane (m)")->capture_default_str();
+  w->add_option("--unit-height", wall.unit_height, "Unit height (m)")->capture_default_str();
+  w->add_option("--unit-length", wall.unit_length, "Unit length (m)")->capture_default_str();
+  w->add_option("--density", wall.density, "Unit density (kg/m^3)")->capture_default_str();
+  w->add_option("--precompression", wall.precompression_mpa, "Vertical stress on the top (MPa)")->capture_default_str();
+  w->add_option("--kn", wall.kn, "Joint normal stiffness (Pa/m)")->capture_default_str();
+  w->add_option("--ks", wall.ks, "Joint shear stiffness (Pa/m)")->capture_default_str();
+  w->add_option("--friction-deg", wall.friction_deg, "Joint friction angle (degrees)")->capture_default_str();
+  w->add_option("--contacts-per-joint", wall.contacts_per_joint, "Contact points along a joint")->capture_default_str();
+  w->add_option("--velocity", wall.velocity, "Horizontal loading velocity (m/s)")->capture_default_str();
+  w->add_option("--max-displacement", wall.max_displacement, "Horizontal travel of the top (m)")->capture_default_str();
+  w->add_flag("--beam-rotation,!--no-beam-rotation", wall.beam_rotation, "Let the top beam rotate")->capture_default_str();
+  w->add_option("--load-height", wall.load_height, "Height of the actuator above the wall top (m)")->capture_default_str();
+  w->add_option("--max-time", wall.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
+  w->add_option("-o,--output", wall_out, "Scene file to write")->required();
+  w->callback([] {
+    save_scene(make_wall(wall), wall_out);
+    std::cout << "wrote " << wall_out << "\n";
+  });
+}
+
+DEMCAL_REGISTER_COMMAND("scene", setup_scene);
+
+}  // namespace
