@@ -154,9 +154,9 @@ void Scene::Validate(const std::string& source) const {
     const double area = geometry::signed_area(b.vertices);
     double extent = 0;
     for (const Vec2& v : b.vertices) extent = std::max(extent, (v - b.vertices[0]).norm());
+    if (geometry::edges_self_intersect(b.vertices)) throw SceneError(where + ".vertices", "self-intersecting polygon");
     if (std::abs(area) <= 1e-12 * std::max(extent * extent, 1e-30))
       throw SceneError(where + ".vertices", "zero-area block");
-    if (geometry::edges_self_intersect(b.vertices)) throw SceneError(where + ".vertices", "self-intersecting polygon");
     if (area < 0) throw SceneError(where + ".vertices", "vertices must be counter-clockwise");
     if (!geometry::is_convex_ccw(b.vertices)) throw SceneError(where + ".vertices", "the polygon is not convex");
     any_free = any_free || !b.fixed;

@@ -1,0 +1,180 @@
+// Optimiser benchmark (not a test): median and quartiles of the best value found by demcal's PSO,
+// TBPSO (both readings of Δx), GA, the NLopt algorithms, and pagmo2's pso and sga, at equal
+// evaluation budgets, on Sphere, Rosenbrock, Rastrigin and Ackley (shifted, see test_functions.hpp)
+// in 3 and 10 dimensions, at 200 and 500 evaluations, over 25 seeds. Prints Markdown tables.
+//
+//   bench_optimise_pagmo [--seeds N] [--quick]     (--quick: 5 seeds, 3-D only)
+#include <demcal/optimise/optimise.hpp>
+
+#include <pagmo/algorithms/pso.hpp>
+#include <pagmo/algorithms/sga.hpp>
+#include <pagmo/population.hpp>
+#include <pagmo/problem.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+using namespace demcal::optimise;
+
+namespace {
+
+// pagmo user-defined problem wrapping a demcal test function; records the best value ever evaluated
+// and the number of evaluations, so both libraries are scored the same way.
+struct PagmoProblem {
+  TestFunction function;
+  std::shared_ptr<double> best = std::make_shared<double>(HUGE_VAL);
+  std::shared_ptr<long> count = std::make_shared<long>(0);
+  pagmo::vector_double fitness(const pagmo::vector_double& x) const {
+    const double f = function.evaluate(Eigen::Map<const Eigen::VectorXd>(x.data(), static_cast<Eigen::Index>(x.size())));
+    *best = std::min(*best, f);
+    ++*count;
+    return {f};
+  }
+  std::pair<pagmo::vector_double, pagmo::vector_double> get_bounds() const {
+    return {pagmo::vector_double(function.lower.data(), function.lower.data() + function.dimension),
+            pagmo::vector_double(function.upper.data(), function.upper.data() + function.dimension)};
+  }
+};
+
+constexpr int kPopulation = 10;
+
+double run_pagmo(const std::string& which, const TestFunction& f, long budget, unsigned seed, long& evaluations) {
+  PagmoProblem udp{f};
+  auto best = udp.best;
+  auto count = udp.count;
+  pagmo::problem problem{udp};
+  pagmo::population population{problem, kPopulation, seed};
+  const unsigned generations = static_cast<unsigned>(budget / kPopulation - 1);
+  if (which == "pagmo:pso") {
+    pagmo::algorithm algorithm{pagmo::pso(generations, 0.7298, 2.05, 2.05, 0.5, 5u, 2u, 4u, false, seed)};
+    population = algorithm.evolve(population);
+  } else {
+    pagmo::algorithm algorithm{pagmo::sga(generations, 0.9, 1.0, 0.02, 1.0, 2u, "exponential", "polynomial",
+                                          "tournament", seed)};
+    population = algorithm.evolve(population);
+  }
+  evaluations = *count;
+  return *best;
+}
+
+double run_demcal(const std::string& algorithm, const TestFunction& f, long budget, unsigned seed, long& evaluations) {
+  ParameterSpace space;
+  for (int k = 0; k < f.dimension; ++k) space.add(std::string("x").append(std::to_string(k)), f.lower[k], f.upper[k]);
+  OptimiserOptions options;
+  options.population = kPopulation;
+  options.max_evaluations = budget;
+  options.seed = seed;
+  options.algorithm = algorithm;
+  if (algorithm == "tbpso:paper" || algorithm == "tbpso:toward") {
+    options.algorithm = "tbpso";
+    options.trust_direction = algorithm.substr(6);
+  }
+  if (algorithm == "ga:gaussian-elitist") {
+    options.algorithm = "ga";
+    options.ga_mutation = GaMutation::gaussian;
+    options.elitism = 1;
+  }
+  auto optimiser = make_optimiser(space, options);
+  const auto summary = minimise(*optimiser, f.evaluate);
+  evaluations = summary.evaluations;
+  return summary.best_value;
+}
+
+struct Quartiles {
+  double q1, median, q3;
+};
+
+Quartiles quartiles(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  auto at = [&](double q) {
+    const double position = q * static_cast<double>(values.size() - 1);
+    const auto lo = static_cast<std::size_t>(position);
+    const auto hi = std::min(lo + 1, values.size() - 1);
+    return values[lo] + (position - static_cast<double>(lo)) * (values[hi] - values[lo]);
+  };
+  return {at(0.25), at(0.5), at(0.75)};
+}
+
+std::string cell(const Quartiles& q) {
+  char text[96];
+  std::snprintf(text, sizeof text, "%.3g [%.3g, %.3g]", q.median, q.q1, q.q3);
+  return text;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int seeds = 25;
+  std::vector<int> dimensions = {3, 10};
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--seeds") && i + 1 < argc) seeds = std::atoi(argv[++i]);
+    if (!std::strcmp(argv[i], "--quick")) seeds = 5, dimensions = {3};
+  }
+  const std::vector<std::string> algorithms = {
+      "pso", "tbpso:toward", "tbpso:paper", "ga", "ga:gaussian-elitist",
+      "nlopt:GN_DIRECT_L", "nlopt:GN_CRS2_LM", "nlopt:GN_ISRES", "nlopt:GN_ESCH",
+      "nlopt:LN_BOBYQA", "nlopt:LN_NELDERMEAD", "nlopt:LN_SBPLX", "pagmo:pso", "pagmo:sga"};
+  const auto& functions = test_function_names();
+  // medians[dim][budget][function][algorithm]
+  std::map<int, std::map<long, std::map<std::string, std::map<std::string, double>>>> medians;
+  const auto start = std::chrono::steady_clock::now();
+
+  std::printf("Population/batch %d for the population-based methods; %d seeds (1..%d) per cell; "
+              "cells: median [first quartile, third quartile] of the best value found.\n\n",
+              kPopulation, seeds, seeds);
+  for (int dimension : dimensions) {
+    for (long budget : {200L, 500L}) {
+      std::printf("### %d-D, %ld evaluations\n\n| algorithm |", dimension, budget);
+      for (const auto& name : functions) std::printf(" %s |", name.c_str());
+      std::printf("\n|---|");
+      for (std::size_t k = 0; k < functions.size(); ++k) std::printf("---|");
+      std::printf("\n");
+      for (const auto& algorithm : algorithms) {
+        std::printf("| %s |", algorithm.c_str());
+        for (const auto& name : functions) {
+          const TestFunction f = make_test_function(name, dimension);
+          std::vector<double> best;
+          long max_evaluations = 0;
+          for (int seed = 1; seed <= seeds; ++seed) {
+            long evaluations = 0;
+            const bool pagmo = algorithm.rfind("pagmo:", 0) == 0;
+            best.push_back(pagmo ? run_pagmo(algorithm, f, budget, static_cast<unsigned>(seed), evaluations)
+                                 : run_demcal(algorithm, f, budget, static_cast<unsigned>(seed), evaluations));
+            max_evaluations = std::max(max_evaluations, evaluations);
+          }
+          if (max_evaluations > budget)
+            std::fprintf(stderr, "warning: %s used %ld > %ld evaluations on %s\n", algorithm.c_str(), max_evaluations,
+                         budget, name.c_str());
+          const Quartiles q = quartiles(best);
+          medians[dimension][budget][name][algorithm] = q.median;
+          std::printf(" %s |", cell(q).c_str());
+        }
+        std::printf("\n");
+        std::fflush(stdout);
+      }
+      std::printf("\n");
+    }
+  }
+
+  std::printf("### Goals\n\n");
+  for (int dimension : dimensions)
+    for (long budget : {200L, 500L})
+      for (const auto& name : functions) {
+        const auto& m = medians[dimension][budget][name];
+        const double ratio = m.at("pso") / std::max(m.at("pagmo:pso"), 1e-300);
+        std::printf("- %d-D %ld evals %s: PSO median / pagmo PSO median = %.3g (%s); TBPSO(toward) / PSO = %.3g, "
+                    "TBPSO(paper) / PSO = %.3g\n",
+                    dimension, budget, name.c_str(), ratio, ratio <= 1.10 ? "within 10 % or better" : "worse",
+                    m.at("tbpso:toward") / std::max(m.at("pso"), 1e-300),
+                    m.at("tbpso:paper") / std::max(m.at("pso"), 1e-300));
+      }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("\nWall time %.1f s.\n", seconds);
+  return 0;
+}

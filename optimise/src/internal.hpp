@@ -1,0 +1,51 @@
+// Private helpers of the optimise module (random numbers, JSON of doubles and vectors, factories).
+#pragma once
+
+#include "demcal/optimise/optimiser.hpp"
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <string>
+
+namespace demcal::optimise::detail {
+
+// Uniform in [0, 1) from the top 53 bits: identical on every standard library.
+inline double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
+
+// Standard normal by Box-Muller (two uniforms per draw, the second value discarded for simplicity).
+inline double standard_normal(std::mt19937_64& rng) {
+  double u1 = uniform01(rng);
+  const double u2 = uniform01(rng);
+  if (u1 <= 0.0) u1 = 0x1.0p-53;
+  return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586476925 * u2);
+}
+
+// Non-finite (NaN, ±inf) told values are the worst: +inf.
+inline double sanitise(double value) { return std::isfinite(value) ? value : HUGE_VAL; }
+
+std::string rng_to_string(const std::mt19937_64& rng);
+void rng_from_string(std::mt19937_64& rng, const std::string& text);
+
+nlohmann::json number_to_json(double value);    // non-finite -> "inf" / "-inf" / "nan"
+double number_from_json(const nlohmann::json& value, const std::string& key);
+nlohmann::json vector_to_json(const Eigen::VectorXd& v);
+Eigen::VectorXd vector_from_json(const nlohmann::json& value, const std::string& key);
+nlohmann::json matrix_to_json(const Eigen::MatrixXd& m);  // array of rows
+Eigen::MatrixXd matrix_from_json(const nlohmann::json& value, const std::string& key);
+
+// Looks up a key in a state object; throws std::invalid_argument naming it when missing.
+const nlohmann::json& state_field(const nlohmann::json& state, const std::string& key);
+
+std::unique_ptr<Optimiser> make_swarm(const ParameterSpace& space, const OptimiserOptions& options, bool trust_based);
+std::unique_ptr<Optimiser> make_genetic(const ParameterSpace& space, const OptimiserOptions& options);
+std::unique_ptr<Optimiser> make_nlopt(const ParameterSpace& space, const OptimiserOptions& options,
+                                      const std::string& algorithm_name);
+
+// "LN_BOBYQA" from "nlopt:LN_BOBYQA", "nlopt:nlopt_ln_bobyqa", ...; empty if not an nlopt name.
+std::string nlopt_name_from_algorithm(const std::string& algorithm);
+
+}  // namespace demcal::optimise::detail

@@ -1,0 +1,243 @@
+// PSO (paper eqs. 1-10) and the trust-based PSO (eqs. 11-15) in the unit cube.
+#include "demcal/optimise/swarm.hpp"
+
+#include "internal.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace demcal::optimise {
+
+Eigen::MatrixXd tbpso_relative_distances(const Eigen::MatrixXd& positions) {
+  const Eigen::Index n = positions.rows();
+  Eigen::MatrixXd d = Eigen::MatrixXd::Zero(n, n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (Eigen::Index j = 0; j < n; ++j)
+      if (i != j) d(i, j) = (positions.row(i) - positions.row(j)).norm();
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const double sum = d.row(i).sum();
+    if (sum > 0.0) d.row(i) /= sum;
+  }
+  return d;
+}
+
+Eigen::MatrixXd tbpso_trust_update(const Eigen::MatrixXd& previous_trust, const Eigen::VectorXd& personal_best_values,
+                                   const Eigen::VectorXd& current_values) {
+  const Eigen::Index n = personal_best_values.size();
+  if (previous_trust.rows() != n || previous_trust.cols() != n || current_values.size() != n)
+    throw std::invalid_argument("tbpso_trust_update: sizes of trust matrix and value vectors differ");
+  Eigen::MatrixXd trust = Eigen::MatrixXd::Zero(n, n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (Eigen::Index j = 0; j < n; ++j) {
+      if (i == j || personal_best_values[i] <= personal_best_values[j]) continue;  // C_ij = 0
+      trust(i, j) = current_values[j] <= personal_best_values[j] ? previous_trust(i, j) + 1.0
+                                                                 : previous_trust(i, j) - 1.0;
+    }
+  return trust;
+}
+
+Eigen::MatrixXd tbpso_trust_pull(const Eigen::MatrixXd& positions, const Eigen::MatrixXd& trust,
+                                 TrustDirection direction) {
+  const Eigen::Index n = positions.rows();
+  if (trust.rows() != n || trust.cols() != n)
+    throw std::invalid_argument("tbpso_trust_pull: trust matrix does not match the number of particles");
+  const Eigen::MatrixXd relative = tbpso_relative_distances(positions);
+  Eigen::MatrixXd pull = Eigen::MatrixXd::Zero(n, positions.cols());
+  const double sign = direction == TrustDirection::toward ? 1.0 : -1.0;
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (Eigen::Index j = 0; j < n; ++j) {
+      const double weight = relative(i, j) * trust(i, j);
+      if (weight != 0.0) pull.row(i) += weight * sign * (positions.row(j) - positions.row(i));
+    }
+  return pull;
+}
+
+double constriction_factor(double phi) {
+  if (!(phi >= 4.0)) throw std::invalid_argument("constriction factor needs phi >= 4, got " + std::to_string(phi));
+  return 2.0 / std::abs(2.0 - phi - std::sqrt(phi * phi - 4.0 * phi));
+}
+
+namespace detail {
+namespace {
+
+class SwarmOptimiser final : public Optimiser {
+ public:
+  SwarmOptimiser(const ParameterSpace& space, const OptimiserOptions& options, bool trust_based)
+      : Optimiser(space, options, trust_based ? "tbpso" : "pso"),
+        trust_based_(trust_based),
+        direction_(parse_trust_direction(options.trust_direction)),
+        n_(options.population),
+        d_(space.dimension()),
+        rng_(options.seed) {
+    x_.resize(n_, d_);
+    v_ = Eigen::MatrixXd::Zero(n_, d_);
+    for (int i = 0; i < n_; ++i)
+      for (int k = 0; k < d_; ++k) x_(i, k) = uniform01(rng_);
+    if (options.initial_velocity > 0.0)
+      for (int i = 0; i < n_; ++i)
+        for (int k = 0; k < d_; ++k) v_(i, k) = options.initial_velocity * (2.0 * uniform01(rng_) - 1.0);
+    p_ = x_;
+    fp_ = Eigen::VectorXd::Constant(n_, HUGE_VAL);
+    fx_ = Eigen::VectorXd::Constant(n_, HUGE_VAL);
+    trust_ = Eigen::MatrixXd::Zero(n_, n_);
+    const long budget = options.evaluation_budget();
+    planned_iterations_ = static_cast<int>((budget + n_ - 1) / n_);
+  }
+
+  std::vector<Eigen::VectorXd> ask() override {
+    if (!pending_) {
+      if (done()) return {};
+      const long remaining = options_.evaluation_budget() - evaluations_;
+      pending_count_ = static_cast<int>(std::min<long>(n_, remaining));
+      pending_ = true;
+    }
+    std::vector<Eigen::VectorXd> batch;
+    for (int i = 0; i < pending_count_; ++i) batch.push_back(physical(x_.row(i).transpose()));
+    return batch;
+  }
+
+  void tell(const std::vector<double>& fitness) override {
+    if (!pending_) throw std::logic_error(name_ + ": tell() without a pending ask()");
+    if (static_cast<int>(fitness.size()) != pending_count_)
+      throw std::invalid_argument(name_ + ": tell() got " + std::to_string(fitness.size()) + " values for " +
+                                  std::to_string(pending_count_) + " candidates");
+    for (int i = 0; i < pending_count_; ++i) {
+      fx_[i] = record(x_.row(i).transpose(), fitness[static_cast<std::size_t>(i)]);
+      if (fx_[i] <= fp_[i]) {
+        fp_[i] = fx_[i];
+        p_.row(i) = x_.row(i);
+      }
+    }
+    if (trust_based_) trust_ = tbpso_trust_update(trust_, fp_, fx_);
+    pending_ = false;
+    ++iteration_;
+    update_status_after_tell();
+    if (iteration_ >= planned_iterations_ && status_ == OptimiserStatus::running)
+      status_ = OptimiserStatus::budget_exhausted;
+    if (!done()) move();
+  }
+
+  bool can_substitute() const override { return true; }
+
+  void substitute(std::size_t index, const Eigen::VectorXd& physical_point) override {
+    if (!pending_) throw std::logic_error(name_ + ": substitute() needs a pending ask()");
+    if (index >= static_cast<std::size_t>(pending_count_))
+      throw std::invalid_argument(name_ + ": substitute() index " + std::to_string(index) + " outside the batch of " +
+                                  std::to_string(pending_count_));
+    const Eigen::VectorXd unit = space_.to_unit(physical_point);
+    for (int k = 0; k < d_; ++k)
+      if (!(unit[k] >= -1e-12 && unit[k] <= 1.0 + 1e-12))
+        throw std::invalid_argument(name_ + ": substituted value " + std::to_string(physical_point[k]) +
+                                    " of parameter '" + space_.free_parameters()[k].name + "' is outside its bounds");
+    x_.row(static_cast<Eigen::Index>(index)) = unit.cwiseMax(0.0).cwiseMin(1.0).transpose();
+  }
+
+  nlohmann::json save_state() const override {
+    nlohmann::json s = save_common();
+    s["x"] = matrix_to_json(x_);
+    s["v"] = matrix_to_json(v_);
+    s["p"] = matrix_to_json(p_);
+    s["fp"] = vector_to_json(fp_);
+    s["fx"] = vector_to_json(fx_);
+    s["trust"] = matrix_to_json(trust_);
+    s["rng"] = rng_to_string(rng_);
+    s["pending"] = pending_;
+    s["pending_count"] = pending_count_;
+    return s;
+  }
+
+  void load_state(const nlohmann::json& state) override {
+    load_common(state);
+    auto matrix = [&](const char* key, Eigen::Index rows, Eigen::Index cols) {
+      Eigen::MatrixXd m = matrix_from_json(state_field(state, key), key);
+      if (m.rows() != rows || m.cols() != cols)
+        throw std::invalid_argument(name_ + " state: '" + key + "' has the wrong shape");
+      return m;
+    };
+    auto vector = [&](const char* key) {
+      Eigen::VectorXd v = vector_from_json(state_field(state, key), key);
+      if (v.size() != n_) throw std::invalid_argument(name_ + " state: '" + key + "' has the wrong length");
+      return v;
+    };
+    x_ = matrix("x", n_, d_);
+    v_ = matrix("v", n_, d_);
+    p_ = matrix("p", n_, d_);
+    trust_ = matrix("trust", n_, n_);
+    fp_ = vector("fp");
+    fx_ = vector("fx");
+    rng_from_string(rng_, state_field(state, "rng").get<std::string>());
+    pending_ = state_field(state, "pending").get<bool>();
+    pending_count_ = state_field(state, "pending_count").get<int>();
+  }
+
+ private:
+  Eigen::VectorXd global_best() const {
+    Eigen::Index best = 0;
+    for (Eigen::Index i = 1; i < fp_.size(); ++i)
+      if (fp_[i] < fp_[best]) best = i;
+    return p_.row(best).transpose();
+  }
+
+  double inertia() const {
+    // The velocity update after round r (r = 1 .. planned-1) uses ω from inertia_start (first
+    // update) to inertia_end (last update), linearly (eq. 6).
+    if (planned_iterations_ <= 2) return options_.inertia_start;
+    const double t = static_cast<double>(iteration_ - 1) / (planned_iterations_ - 2);
+    return options_.inertia_start - (options_.inertia_start - options_.inertia_end) * std::min(1.0, t);
+  }
+
+  void move() {
+    const double phi1 = trust_based_ ? options_.tbpso_cognitive : options_.pso_cognitive;
+    const double phi2 = trust_based_ ? options_.tbpso_social : options_.pso_social;
+    const double phi3 = trust_based_ ? options_.tbpso_trust : 0.0;
+    const double k_factor = options_.constriction ? constriction_factor(phi1 + phi2 + phi3) : 1.0;
+    const double omega = inertia();
+    const double vmax = options_.max_velocity;
+    const Eigen::VectorXd g = global_best();
+    Eigen::MatrixXd pull;
+    if (trust_based_) pull = tbpso_trust_pull(x_, trust_, direction_);
+    for (int i = 0; i < n_; ++i) {
+      for (int k = 0; k < d_; ++k) {
+        const double r1 = uniform01(rng_);
+        const double r2 = uniform01(rng_);
+        double v = omega * v_(i, k) + phi1 * r1 * (p_(i, k) - x_(i, k)) + phi2 * r2 * (g[k] - x_(i, k));
+        if (trust_based_) v += phi3 * uniform01(rng_) * pull(i, k);
+        v *= k_factor;
+        if (vmax > 0.0) v = std::clamp(v, -vmax, vmax);
+        double x = x_(i, k) + v;
+        if (x < 0.0 || x > 1.0) {
+          if (options_.bounds == BoundHandling::reflect) {
+            x = x < 0.0 ? -x : 2.0 - x;
+            v = -v;
+            x = std::clamp(x, 0.0, 1.0);
+          } else {
+            x = std::clamp(x, 0.0, 1.0);
+            v = 0.0;
+          }
+        }
+        x_(i, k) = x;
+        v_(i, k) = v;
+      }
+    }
+  }
+
+  bool trust_based_;
+  TrustDirection direction_;
+  int n_, d_;
+  int planned_iterations_ = 1;
+  Eigen::MatrixXd x_, v_, p_, trust_;
+  Eigen::VectorXd fp_, fx_;
+  std::mt19937_64 rng_;
+  bool pending_ = false;
+  int pending_count_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<Optimiser> make_swarm(const ParameterSpace& space, const OptimiserOptions& options, bool trust_based) {
+  return std::make_unique<SwarmOptimiser>(space, options, trust_based);
+}
+
+}  // namespace detail
+}  // namespace demcal::optimise

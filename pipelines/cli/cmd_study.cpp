@@ -1,0 +1,31 @@
+// `demcal study study.json`: algorithms x seeds on one calibration problem (study.hpp).
+#include "command_registry.hpp"
+
+#include "demcal/pipelines/study.hpp"
+
+#include <iostream>
+#include <memory>
+
+namespace {
+
+void setup(CLI::App& app) {
+  struct Flags {
+    std::string file, out;
+    bool quiet = false;
+  };
+  auto flags = std::make_shared<Flags>();
+  auto* sub = app.add_subcommand("study", "Compare algorithms x seeds on one calibration problem (paper-style tables)");
+  sub->add_option("study", flags->file, "Study JSON file")->required()->check(CLI::ExistingFile);
+  sub->add_option("--out", flags->out, "Output folder (overrides the file's)");
+  sub->add_flag("--quiet", flags->quiet, "No progress lines");
+  sub->callback([flags] {
+    auto config = demcal::pipelines::load_study(flags->file);
+    if (!flags->out.empty()) config.output = flags->out;
+    demcal::pipelines::run_study(config, !flags->quiet);
+    if (!flags->quiet) std::cout << "study: " << config.output << "/study.md\n";
+  });
+}
+
+}  // namespace
+
+DEMCAL_REGISTER_COMMAND("study", setup);

@@ -1,0 +1,177 @@
+// Calibration campaigns: the configuration (campaign.json or flags), the measured curves with their
+// column mapping and units, and run_campaign(), which drives optimiser, backend, archive and report.
+//
+// Campaign file (JSON; relative paths are relative to the file's folder). docs/pipelines.md has the
+// full reference; the essentials:
+//   {
+//     "name": "arch-demo",
+//     "scene": {"file": "arch.json"}                      a scene file, or
+//              {"generator": "arch", "options": {...}}    make_arch / make_wall with ArchOptions /
+//                                                         WallOptions fields by name
+//     "measured": {"file": "measured.csv",
+//                  "columns": {"force": {"column": "horizontal_force", "unit": "kN"},
+//                              "top_horizontal": {"column": "top_displacement", "unit": "mm",
+//                                                 "scale": 1}}},
+//     "cases": [ {"name": ..., "scene": ..., "measured": ..., "weight": 1}, ... ]
+//                                                         several experiments calibrated together
+//                                                         (instead of scene + measured)
+//     "parameters": [{"name": "kn", "lower": 1e8, "upper": 1e10, "scale": "log10"}, ...],
+//     "fixed": {"name": value}, "tied": {"name": "ks", "source": "kn", "ratio": 2.5},
+//     "objective": {"type": 2, "weights": {"load_vertical": 1}, "points": 200, "smoother": {...}},
+//     "optimiser": {"algorithm": "tbpso", "population": 10, "iterations": 20,
+//                   "max_evaluations": 0, "seed": 1, ... any OptimiserOptions field},
+//     "backend": {"type": "threads", "threads": 0} | {"type": "command", "command": "...",
+//                 "timeout_s": 60, "parallel": 0} | {"type": "mpi"},
+//     "output": "out/arch-demo", "report": true
+//   }
+// Parameter names are those of dem::set_parameter: kn, ks (Pa/m), friction_deg (degrees) for every
+// joint group, "<group>.kn" etc. for one group. Mapped measured columns are converted to SI
+// (m, N): units mm, cm, m, um, N, kN, MN; a column's unit comes from the mapping, else from the
+// file's units row, else SI is assumed.
+#pragma once
+
+#include "demcal/dem/scene.hpp"
+#include "demcal/optimise/optimiser.hpp"
+#include "demcal/optimise/parameter_space.hpp"
+#include "demcal/smoothing/curve.hpp"
+#include "demcal/smoothing/objective.hpp"
+#include "demcal/smoothing/smoother.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <limits>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace demcal::pipelines {
+
+// Bad campaign input; the message names the file and key (e.g. "c.json: parameters[1].lower: ...").
+class CampaignError : public std::runtime_error {
+ public:
+  explicit CampaignError(const std::string& message) : std::runtime_error(message) {}
+};
+
+// One measured column: which file column feeds the engine-named column `target`.
+struct ColumnMapping {
+  std::string target;         // "force" or a gauge name of the scene
+  std::string column;         // column name in the file
+  std::string unit;           // "" = the file's unit for that column (or SI if the file has none)
+  double scale = 1;           // extra factor (e.g. -1 to flip a sign), applied after the unit
+};
+
+struct MeasuredSpec {
+  std::string file;                    // absolute or relative to the campaign file
+  std::vector<ColumnMapping> columns;  // empty = take the file's columns by name, converting units
+};
+
+struct SceneSpec {
+  std::string file;                    // a scene JSON file, or
+  std::string generator;               // "arch" | "wall"
+  nlohmann::json options = nlohmann::json::object();  // generator fields by name
+};
+
+struct CaseSpec {
+  std::string name = "main";
+  SceneSpec scene;
+  MeasuredSpec measured;
+  double weight = 1;                   // this case's share of the fitness, >= 0
+};
+
+struct BackendSpec {
+  std::string type = "threads";        // "threads" | "command" | "mpi"
+  int threads = 0;                     // threads backend: <= 0 = every hardware thread
+  std::string command;                 // command backend: argument template (backend.hpp)
+  double timeout_s = 0;                // command backend: s per run, 0 = none
+  int parallel = 0;                    // command backend: programs at once, <= 0 = hardware threads
+};
+
+struct CampaignConfig {
+  std::string name = "campaign";
+  std::string source = "campaign";     // where it came from, for messages
+  std::vector<CaseSpec> cases;
+  optimise::ParameterSpace space;
+  int objective = 2;                   // 1 or 2 (paper eqs. 16-20; 2 = after neural smoothing)
+  smoothing::ObjectiveOptions objective_options;
+  smoothing::SmootherOptions smoother;
+  optimise::OptimiserOptions optimiser;
+  BackendSpec backend;
+  std::string output = "calibration";  // output folder: result.json, report.md, archive.sqlite
+  std::string archive;                 // "" = <output>/archive.sqlite
+  bool report = true;                  // write report.md and figures
+
+  // Throws CampaignError naming the key and value: no case, a case without measured file or
+  // scene (scene not needed for the command backend), negative weights, bad objective type,
+  // inverted bounds (through ParameterSpace::Validate), invalid optimiser options, unknown backend.
+  void Validate() const;
+  // Everything that determines the result (not output folder, archive, backend or report), as
+  // canonical JSON: its hash is the campaign's key for --resume.
+  nlohmann::json result_defining_json() const;
+  nlohmann::json to_json() const;
+};
+
+// Parses a campaign JSON object; base_dir resolves relative paths; source names it in errors.
+CampaignConfig campaign_from_json(const nlohmann::json& json, const std::string& base_dir,
+                                  const std::string& source);
+CampaignConfig load_campaign(const std::string& path);
+
+// "kn=1e8:1e10:log" | "friction_deg=25:45" | "ks=fixed:1e9" | "ks=tied:kn:2.5" -> added to space.
+// Throws CampaignError naming the flag text.
+void add_parameter_flag(optimise::ParameterSpace& space, const std::string& flag);
+// "force=horizontal_force:kN" | "top_horizontal=top_displacement:mm[:scale]".
+ColumnMapping parse_mapping_flag(const std::string& flag);
+
+// The measured curve of a case, columns `force` (N) and the mapped gauges (m), rows with a NaN in
+// any mapped column kept (the objectives drop them). Throws CampaignError naming file, column, unit.
+smoothing::Curve load_measured(const MeasuredSpec& spec);
+// Factor to SI of a unit ("mm" -> 1e-3, "kN" -> 1e3, "" -> 1); throws CampaignError for unknown ones.
+double unit_factor(const std::string& unit, const std::string& where);
+
+// The case's scene (file or generator), validated. Throws dem::SceneError / CampaignError.
+dem::Scene build_scene(const SceneSpec& spec, const std::string& where);
+
+// ---- running -----------------------------------------------------------------------------------
+
+struct RunOptions {
+  bool resume = false;       // continue the newest campaign with the same key in the archive
+  bool progress = true;      // progress lines on stderr
+  int mpi_rank = 0;          // set by the CLI under mpirun
+  int mpi_size = 1;
+};
+
+struct ParameterSet {
+  std::map<std::string, double> params;
+  double fitness = std::numeric_limits<double>::quiet_NaN();
+  int iteration = 0;
+  int position = 0;
+};
+
+enum class CampaignStatus { completed, failed };
+
+struct CampaignResult {
+  CampaignStatus status = CampaignStatus::completed;
+  std::string message;
+  ParameterSet best;
+  std::vector<ParameterSet> top;             // five best distinct parameter sets, best first
+  long simulations = 0;                      // candidates x cases evaluated in the campaign
+  long candidates = 0;                       // parameter sets evaluated
+  long failed_runs = 0;
+  int iterations = 0;
+  std::vector<double> best_history;          // best fitness after each candidate (convergence)
+  std::vector<ParameterSet> all;             // every evaluation, in order
+  double wall_time_s = 0;                    // this session
+  long simulated_this_session = 0;           // runs actually simulated (not read from the archive)
+  long reused_from_archive = 0;
+  std::string optimiser_status;
+  nlohmann::json to_json() const;            // the result.json layout
+};
+
+// Runs (or resumes) the campaign: writes <output>/result.json, the archive and (if config.report)
+// report.md with figures. Throws CampaignError for bad input found before the first simulation.
+CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& options = {});
+
+// Rank > 0 of an MPI job: serve simulations for the campaign's cases until rank 0 says stop.
+void run_mpi_worker(const CampaignConfig& config);
+
+}  // namespace demcal::pipelines

@@ -1,0 +1,274 @@
+#include "demcal/pipelines/backend.hpp"
+
+#include "demcal/dem/simulation.hpp"
+#include "demcal/pipelines/archive.hpp"
+#include "demcal/pipelines/process.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
+
+int hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
+
+SimulationOutcome outcome_from_recording(const dem::Recording& rec) {
+  SimulationOutcome out;
+  out.status = dem::to_string(rec.status);
+  out.message = rec.message;
+  out.wall_time_s = rec.wall_time_s;
+  out.curves.source = "simulation";
+  out.curves.columns.push_back({"time", "s", rec.time});
+  out.curves.columns.push_back({"force", "N", rec.force});
+  for (size_t g = 0; g < rec.gauge_names.size() && g < rec.gauge_values.size(); ++g)
+    out.curves.columns.push_back({rec.gauge_names[g], "m", rec.gauge_values[g]});
+  auto& d = out.details;
+  d["peak_force"] = rec.peak_force;
+  d["steps"] = rec.steps;
+  d["gravity_steps"] = rec.gravity_steps;
+  d["time_step"] = rec.time_step;
+  d["max_block_displacement"] = rec.max_block_displacement;
+  d["hinges"] = rec.hinges;
+  d["sliding_joints"] = rec.sliding_joints;
+  nlohmann::json joints = nlohmann::json::array();
+  for (const auto& j : rec.joints)
+    joints.push_back({{"name", j.name}, {"joint_group", j.joint_group}, {"open_fraction", j.open_fraction},
+                      {"rotation", j.rotation}, {"slip", j.slip}, {"hinge", j.hinge}, {"sliding", j.sliding}});
+  d["joints"] = joints;
+  nlohmann::json blocks = nlohmann::json::array();
+  for (const auto& b : rec.final_blocks) {
+    nlohmann::json vertices = nlohmann::json::array();
+    for (const auto& v : b.vertices) vertices.push_back({v.x(), v.y()});
+    blocks.push_back({{"name", b.name}, {"vertices", vertices}, {"displacement", {b.displacement.x(), b.displacement.y()}},
+                      {"rotation", b.rotation}, {"fixed", b.fixed}});
+  }
+  d["final_blocks"] = blocks;
+  return out;
+}
+
+SimulationOutcome simulate_with_parameters(const dem::Scene& scene, const std::map<std::string, double>& params,
+                                           const std::atomic<bool>* cancel) {
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    dem::Scene copy = scene;
+    for (const auto& [name, value] : params) dem::set_parameter(copy, name, value);
+    dem::RunControl control;
+    control.cancel = cancel;
+    return outcome_from_recording(dem::simulate(copy, control));
+  } catch (const std::exception& e) {
+    SimulationOutcome out;
+    out.status = "failed";
+    out.message = e.what();
+    out.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return out;
+  }
+}
+
+void run_pool(std::size_t count, int threads, const std::function<SimulationOutcome(std::size_t)>& work,
+              const OutcomeCallback& on_done) {
+  if (count == 0) return;
+  const int n = std::max(1, std::min<int>(threads, static_cast<int>(count)));
+  if (n == 1) {
+    for (std::size_t i = 0; i < count; ++i) on_done(i, work(i));
+    return;
+  }
+  std::mutex mutex;
+  std::condition_variable ready;
+  std::deque<std::pair<std::size_t, SimulationOutcome>> finished;
+  std::size_t next = 0;
+  std::vector<std::thread> pool;
+  for (int t = 0; t < n; ++t)
+    pool.emplace_back([&] {
+      while (true) {
+        std::size_t index;
+        {
+          std::lock_guard<std::mutex> lock(mutex);
+          if (next >= count) return;
+          index = next++;
+        }
+        SimulationOutcome outcome;
+        try {
+          outcome = work(index);
+        } catch (const std::exception& e) {
+          outcome.status = "failed";
+          outcome.message = e.what();
+        }
+        {
+          std::lock_guard<std::mutex> lock(mutex);
+          finished.emplace_back(index, std::move(outcome));
+        }
+        ready.notify_one();
+      }
+    });
+  std::exception_ptr callback_error;
+  std::size_t expected = count;  // shrinks to the tasks already started when a callback throws
+  for (std::size_t reported = 0; reported < expected; ++reported) {
+    std::unique_lock<std::mutex> lock(mutex);
+    ready.wait(lock, [&] { return !finished.empty(); });
+    auto item = std::move(finished.front());
+    finished.pop_front();
+    lock.unlock();
+    if (callback_error) continue;
+    try {
+      on_done(item.first, std::move(item.second));
+    } catch (...) {
+      callback_error = std::current_exception();
+      std::lock_guard<std::mutex> stop(mutex);
+      expected = next;  // started so far; nothing new starts
+      next = count;
+    }
+  }
+  for (auto& thread : pool) thread.join();
+  if (callback_error) std::rethrow_exception(callback_error);
+}
+
+// ---- threads ---------------------------------------------------------------------------------
+
+ThreadBackend::ThreadBackend(std::vector<dem::Scene> scenes, int threads)
+    : scenes_(std::move(scenes)), threads_(threads > 0 ? threads : hardware_threads()) {
+  for (const auto& scene : scenes_) hashes_.push_back(dem::scene_hash(scene));
+}
+
+std::string ThreadBackend::model_hash(std::size_t case_index) const { return hashes_.at(case_index); }
+
+void ThreadBackend::run(const std::vector<SimulationTask>& tasks, const OutcomeCallback& on_done) {
+  run_pool(
+      tasks.size(), threads_,
+      [&](std::size_t i) { return simulate_with_parameters(scenes_.at(tasks[i].case_index), tasks[i].params); },
+      on_done);
+}
+
+// ---- external command ------------------------------------------------------------------------
+
+void CommandBackendOptions::Validate() const {
+  const auto words = split_command_line(command);
+  const auto names = placeholder_names(words);
+  bool has_output = false;
+  for (const auto& name : names) {
+    if (name == "output") {
+      has_output = true;
+      continue;
+    }
+    if (name == "workdir" || name == "case" || name == "scene") continue;
+    if (std::find(parameter_names.begin(), parameter_names.end(), name) == parameter_names.end()) {
+      std::string known = "output, workdir, case, scene";
+      for (const auto& p : parameter_names) known += ", " + p;
+      throw std::invalid_argument("command template: unknown placeholder {" + name + "} (known: " + known + ")");
+    }
+  }
+  if (!has_output)
+    throw std::invalid_argument("command template must contain {output} (the CSV the program writes): " + command);
+  if (!(timeout_s >= 0)) throw std::invalid_argument("command timeout must be >= 0 s, got " + std::to_string(timeout_s));
+  if (work_root.empty()) throw std::invalid_argument("command backend: empty work_root");
+  if (case_names.empty()) throw std::invalid_argument("command backend: no cases");
+}
+
+CommandBackend::CommandBackend(CommandBackendOptions options)
+    : options_(std::move(options)), parallel_(options_.parallel > 0 ? options_.parallel : hardware_threads()) {
+  options_.Validate();
+  words_ = split_command_line(options_.command);
+  fs::create_directories(options_.work_root);
+}
+
+std::string CommandBackend::model_hash(std::size_t case_index) const {
+  std::string scene_text;
+  const std::string& scene_file = options_.scene_files.size() > case_index ? options_.scene_files[case_index] : "";
+  if (!scene_file.empty()) {
+    std::ifstream in(scene_file, std::ios::binary);
+    std::ostringstream buffer;
+    buffer << in.rdbuf();
+    scene_text = buffer.str();
+  }
+  return hash_text("command\n" + options_.command + "\n" + options_.case_names.at(case_index) + "\n" + scene_text);
+}
+
+namespace {
+std::string tail_of_file(const std::string& path, std::size_t max_chars) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  std::string text = buffer.str();
+  while (!text.empty() && (text.back() == '\n' || text.back() == '\r' || text.back() == ' ')) text.pop_back();
+  if (text.size() > max_chars) text = "..." + text.substr(text.size() - max_chars);
+  for (auto& c : text)
+    if (c == '\n') c = '|';
+  return text;
+}
+}  // namespace
+
+SimulationOutcome CommandBackend::run_one(const SimulationTask& task) const {
+  SimulationOutcome out;
+  const std::string& case_name = options_.case_names.at(task.case_index);
+  const fs::path workdir = fs::absolute(fs::path(options_.work_root) /
+                                        (case_name + "-" + hash_text(parameter_key(task.params))));
+  std::error_code ec;
+  fs::remove_all(workdir, ec);
+  fs::create_directories(workdir, ec);
+  if (ec) {
+    out.message = "cannot create run folder " + workdir.string() + ": " + ec.message();
+    return out;
+  }
+  const std::string output = (workdir / "output.csv").string();
+  std::map<std::string, std::string> values{{"output", output},
+                                            {"workdir", workdir.string()},
+                                            {"case", case_name},
+                                            {"scene", options_.scene_files.size() > task.case_index
+                                                          ? options_.scene_files[task.case_index]
+                                                          : std::string()}};
+  for (const auto& [name, value] : task.params) {
+    char buffer[40];
+    std::snprintf(buffer, sizeof buffer, "%.17g", value);
+    values[name] = buffer;
+  }
+  ProcessOptions process;
+  try {
+    process.argv = expand_placeholders(words_, values);
+  } catch (const std::exception& e) {
+    out.message = e.what();
+    return out;
+  }
+  process.working_directory = workdir.string();
+  process.timeout_s = options_.timeout_s;
+  process.stdout_path = (workdir / "stdout.txt").string();
+  process.stderr_path = (workdir / "stderr.txt").string();
+  const ProcessResult result = run_process(process);
+  out.wall_time_s = result.wall_time_s;
+  out.details = {{"command", process.argv}, {"workdir", workdir.string()}, {"process_status", to_string(result.status)}};
+  if (!result.ok()) {
+    out.message = "external command " + result.message;
+    const std::string err = tail_of_file(process.stderr_path, 300);
+    if (!err.empty()) out.message += "; stderr: " + err;
+    return out;
+  }
+  if (!fs::exists(output)) {
+    out.message = "external command exited 0 but wrote no output file " + output;
+    return out;
+  }
+  try {
+    out.curves = smoothing::read_curve(output);
+    out.curves.column("force");  // throws naming the columns when it is missing
+  } catch (const std::exception& e) {
+    out.curves = {};
+    out.message = std::string("external command output unreadable: ") + e.what();
+    return out;
+  }
+  out.status = "completed";
+  return out;
+}
+
+void CommandBackend::run(const std::vector<SimulationTask>& tasks, const OutcomeCallback& on_done) {
+  run_pool(tasks.size(), parallel_, [&](std::size_t i) { return run_one(tasks[i]); }, on_done);
+}
+
+}  // namespace demcal::pipelines

@@ -1,0 +1,461 @@
+#include "demcal/pipelines/campaign.hpp"
+
+#include "demcal/pipelines/archive.hpp"
+#include "demcal/pipelines/backend.hpp"
+#include "demcal/pipelines/mpi.hpp"
+#include "demcal/pipelines/progress.hpp"
+#include "demcal/pipelines/report.hpp"
+#include "demcal/pipelines/version.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <set>
+
+namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+bool usable_status(const std::string& status) {
+  return status == "completed" || status == "collapsed" || status == "step_limit";
+}
+
+json params_json(const std::map<std::string, double>& params) {
+  json j = json::object();
+  for (const auto& [name, value] : params) j[name] = value;
+  return j;
+}
+
+json finite_or_null(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
+
+// Everything prepared before the first simulation: cases, objectives, backend.
+struct Prepared {
+  std::vector<smoothing::Curve> measured;
+  std::vector<std::string> objective_keys;
+  std::vector<std::unique_ptr<smoothing::Objective2>> objective2;  // per case, objective 2 only
+  std::vector<dem::Scene> scenes;                                   // engine backends only
+};
+
+std::vector<std::string> all_parameter_names(const optimise::ParameterSpace& space) {
+  std::vector<std::string> names = space.free_names();
+  for (const auto& [name, value] : space.fixed_parameters()) names.push_back(name);
+  if (space.tied_parameter()) names.push_back(space.tied_parameter()->name);
+  return names;
+}
+
+std::vector<dem::Scene> build_scenes(const CampaignConfig& config) {
+  std::vector<dem::Scene> scenes;
+  const auto names = all_parameter_names(config.space);
+  for (size_t i = 0; i < config.cases.size(); ++i) {
+    const std::string where = config.source + ": cases[" + std::to_string(i) + "].scene";
+    dem::Scene scene = build_scene(config.cases[i].scene, where);
+    dem::Scene probe = scene;
+    for (const auto& name : names) {
+      try {
+        dem::set_parameter(probe, name, dem::get_parameter(scene, name));
+      } catch (const std::exception& e) {
+        std::string known;
+        for (const auto& n : dem::parameter_names(scene)) known += (known.empty() ? "" : ", ") + n;
+        throw CampaignError(config.source + ": parameter '" + name + "' is not a parameter of the scene of case '" +
+                            config.cases[i].name + "' (known: " + known + ")");
+      }
+    }
+    scenes.push_back(std::move(scene));
+  }
+  return scenes;
+}
+
+Prepared prepare(const CampaignConfig& config) {
+  Prepared p;
+  for (const auto& c : config.cases) {
+    p.measured.push_back(load_measured(c.measured));
+    json key = {{"measured", config.result_defining_json()["cases"][p.measured.size() - 1]["measured"]},
+                {"objective", config.objective},
+                {"points", config.objective_options.points},
+                {"weights", config.objective_options.channel_weights}};
+    if (config.objective == 2) key["smoother"] = config.result_defining_json()["objective"]["smoother"];
+    p.objective_keys.push_back(hash_text(key.dump()));
+    try {
+      smoothing::common_channels(p.measured.back(), p.measured.back(), config.objective_options);
+    } catch (const std::exception& e) {
+      throw CampaignError(std::string("measured curve: ") + e.what());
+    }
+    if (config.objective == 2)
+      p.objective2.push_back(
+          std::make_unique<smoothing::Objective2>(p.measured.back(), config.objective_options, config.smoother));
+  }
+  if (config.backend.type != "command") p.scenes = build_scenes(config);
+  return p;
+}
+
+std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, const Prepared& prepared,
+                                                const RunOptions& options) {
+  if (config.backend.type == "command") {
+    CommandBackendOptions o;
+    o.command = config.backend.command;
+    o.timeout_s = config.backend.timeout_s;
+    o.parallel = config.backend.parallel;
+    o.work_root = (fs::path(config.output) / "runs").string();
+    for (const auto& c : config.cases) {
+      o.case_names.push_back(c.name);
+      o.scene_files.push_back(c.scene.file);
+    }
+    o.parameter_names = all_parameter_names(config.space);
+    try {
+      return std::make_unique<CommandBackend>(o);
+    } catch (const std::invalid_argument& e) {
+      throw CampaignError(config.source + ": backend.command: " + e.what());
+    }
+  }
+  if (config.backend.type == "mpi") {
+    if (!mpi_compiled()) throw CampaignError("this demcal was built without MPI; use --backend threads");
+    if (options.mpi_size < 1) throw CampaignError("--backend mpi must run under mpirun");
+    return make_mpi_backend(prepared.scenes);
+  }
+  return std::make_unique<ThreadBackend>(prepared.scenes, config.backend.threads);
+}
+
+// Fitness of one run against one case, from the archive or computed (objective 1 here; objective 2
+// in batches by the caller).
+FitnessRecord objective1_record(const RunRecord& run, const smoothing::Curve& measured, const CampaignConfig& config,
+                                const std::string& key) {
+  FitnessRecord f;
+  f.run_id = run.id;
+  f.objective_key = key;
+  f.objective = config.objective;
+  if (!usable_status(run.status) || run.curves.rows() < 2) return f;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    const auto r = smoothing::objective1(measured, run.curves, config.objective_options);
+    f.objective1 = r.fitness;
+    if (config.objective == 1) {
+      f.fitness = r.fitness;
+      f.channels = r.channels;
+    }
+  } catch (const std::exception& e) {
+    f.channels = {{"error", e.what()}};
+  }
+  f.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return f;
+}
+
+std::vector<ParameterSet> top_distinct(const std::vector<ParameterSet>& all, size_t count) {
+  std::vector<const ParameterSet*> sorted;
+  for (const auto& s : all)
+    if (std::isfinite(s.fitness)) sorted.push_back(&s);
+  std::stable_sort(sorted.begin(), sorted.end(),
+                   [](const ParameterSet* a, const ParameterSet* b) { return a->fitness < b->fitness; });
+  std::vector<ParameterSet> top;
+  std::set<std::string> seen;
+  for (const auto* s : sorted) {
+    if (!seen.insert(parameter_key(s->params)).second) continue;
+    top.push_back(*s);
+    if (top.size() == count) break;
+  }
+  return top;
+}
+
+}  // namespace
+
+json CampaignResult::to_json() const {
+  auto set_json = [](const ParameterSet& s) {
+    return json{{"params", params_json(s.params)}, {"fitness", finite_or_null(s.fitness)},
+                {"iteration", s.iteration}, {"position", s.position}};
+  };
+  json top_json = json::array();
+  for (const auto& s : top) top_json.push_back(set_json(s));
+  json convergence = json::array();
+  for (double v : best_history) convergence.push_back(finite_or_null(v));
+  return {{"status", status == CampaignStatus::completed ? "completed" : "failed"},
+          {"message", message},
+          {"best", set_json(best)},
+          {"top", top_json},
+          {"simulations", simulations},
+          {"candidates", candidates},
+          {"failed_runs", failed_runs},
+          {"iterations", iterations},
+          {"optimiser_status", optimiser_status},
+          {"convergence", convergence},
+          {"wall_time_s", wall_time_s},
+          {"session", {{"simulated", simulated_this_session}, {"reused_from_archive", reused_from_archive}}}};
+}
+
+CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+  config.Validate();
+  std::error_code ec;
+  fs::create_directories(config.output, ec);
+  if (ec) throw CampaignError(config.output + ": cannot create the output folder: " + ec.message());
+
+  Prepared prepared = prepare(config);
+  std::unique_ptr<optimise::Optimiser> optimiser;
+  try {
+    optimiser = optimise::make_optimiser(config.space, config.optimiser);
+  } catch (const std::exception& e) {
+    throw CampaignError(config.source + ": " + e.what());
+  }
+  auto backend = make_backend(config, prepared, options);
+  RunArchive archive(config.archive.empty() ? (fs::path(config.output) / "archive.sqlite").string() : config.archive);
+
+  const json defining = config.result_defining_json();
+  const std::string config_key = hash_text(defining.dump());
+  std::int64_t campaign_id = 0;
+  int next_iteration = 0;
+  if (options.resume) {
+    if (auto previous = archive.latest_campaign(config_key)) {
+      campaign_id = previous->id;
+      if (auto last = archive.last_iteration(campaign_id)) {
+        try {
+          optimiser->load_state(json::parse(last->optimiser_state));
+        } catch (const std::exception& e) {
+          throw CampaignError(archive.path() + ": cannot restore the optimiser state of iteration " +
+                              std::to_string(last->iteration) + ": " + e.what());
+        }
+        next_iteration = last->iteration + 1;
+      }
+    }
+  }
+  if (campaign_id == 0) {
+    CampaignRecord record;
+    record.name = config.name;
+    record.config_key = config_key;
+    record.config = config.to_json();
+    record.code_version = version();
+    campaign_id = archive.create_campaign(record);
+  }
+
+  const size_t cases = config.cases.size();
+  const long budget = config.optimiser.evaluation_budget();
+  const int planned_iterations = static_cast<int>((budget + config.optimiser.population - 1) / config.optimiser.population);
+  CampaignResult result;
+  ProgressPrinter printer(options.progress);
+  ProgressState progress;
+  progress.iterations = planned_iterations;
+  progress.total = budget * static_cast<long>(cases);
+  progress.done = static_cast<long>(archive.evaluations(campaign_id).size() * cases);
+  progress.best = optimiser->best_value();
+
+  for (int iteration = next_iteration; !optimiser->done(); ++iteration) {
+    const std::vector<Eigen::VectorXd> batch = optimiser->ask();
+    if (batch.empty()) break;
+    progress.iteration = iteration + 1;
+    std::vector<std::map<std::string, double>> candidates;
+    for (const auto& x : batch) candidates.push_back(config.space.values(x));
+
+    // Runs: from the archive where they exist, else simulated (each committed as it finishes).
+    std::vector<std::vector<std::int64_t>> run_ids(candidates.size(), std::vector<std::int64_t>(cases, 0));
+    std::vector<SimulationTask> tasks;
+    std::vector<std::pair<size_t, size_t>> task_slots;
+    std::map<std::pair<std::string, std::string>, size_t> queued;  // duplicates inside one batch run once
+    std::vector<std::vector<std::pair<size_t, size_t>>> task_users;
+    for (size_t c = 0; c < candidates.size(); ++c)
+      for (size_t k = 0; k < cases; ++k) {
+        const std::string model = backend->model_hash(k);
+        if (auto run = archive.find_run(model, candidates[c])) {
+          run_ids[c][k] = run->id;
+          ++result.reused_from_archive;
+          ++progress.done;
+          continue;
+        }
+        const auto key = std::make_pair(model, parameter_key(candidates[c]));
+        if (auto it = queued.find(key); it != queued.end()) {
+          task_users[it->second].push_back({c, k});
+          continue;
+        }
+        queued[key] = tasks.size();
+        tasks.push_back({k, candidates[c]});
+        task_users.push_back({{c, k}});
+      }
+    backend->run(tasks, [&](size_t index, SimulationOutcome&& outcome) {
+      RunRecord run;
+      run.model_hash = backend->model_hash(tasks[index].case_index);
+      run.params = tasks[index].params;
+      run.code_version = version();
+      run.backend = backend->name();
+      run.status = outcome.status;
+      run.message = outcome.message;
+      run.wall_time_s = outcome.wall_time_s;
+      run.curves = std::move(outcome.curves);
+      run.details = std::move(outcome.details);
+      const std::int64_t id = archive.insert_run(run);
+      for (const auto& [c, k] : task_users[index]) {
+        run_ids[c][k] = id;
+        ++progress.done;
+      }
+      ++result.simulated_this_session;
+      ++progress.done_this_session;
+      progress.elapsed_s = elapsed();
+      printer.simulation_done(progress);
+    });
+
+    // Fitness per (candidate, case): archived, or computed now and archived.
+    std::vector<std::vector<double>> case_fitness(candidates.size(), std::vector<double>(cases, NAN));
+    for (size_t k = 0; k < cases; ++k) {
+      std::vector<size_t> pending;  // candidates needing objective 2 for this case
+      std::vector<FitnessRecord> pending_records;
+      std::vector<smoothing::Curve> pending_curves;
+      std::map<std::int64_t, size_t> pending_by_run;
+      for (size_t c = 0; c < candidates.size(); ++c) {
+        const std::int64_t id = run_ids[c][k];
+        if (auto f = archive.find_fitness(id, prepared.objective_keys[k])) {
+          case_fitness[c][k] = f->fitness;
+          continue;
+        }
+        if (pending_by_run.count(id)) continue;
+        const RunRecord run = *archive.run(id);
+        FitnessRecord record = objective1_record(run, prepared.measured[k], config, prepared.objective_keys[k]);
+        if (config.objective == 1 || !std::isfinite(record.objective1)) {
+          archive.put_fitness(record);
+          case_fitness[c][k] = record.fitness;
+          continue;
+        }
+        pending_by_run[id] = pending.size();
+        pending.push_back(c);
+        pending_records.push_back(record);
+        pending_curves.push_back(run.curves);
+      }
+      if (!pending.empty()) {
+        const auto start = std::chrono::steady_clock::now();
+        std::vector<smoothing::FitnessResult> results;
+        std::vector<bool> ok(pending.size(), true);
+        try {
+          results = prepared.objective2[k]->evaluate_batch(pending_curves);
+        } catch (const std::exception&) {
+          // One bad curve spoils the batch: evaluate one by one, marking the bad ones failed.
+          results.assign(pending.size(), {});
+          for (size_t i = 0; i < pending.size(); ++i) {
+            try {
+              results[i] = prepared.objective2[k]->evaluate(pending_curves[i]);
+            } catch (const std::exception& e) {
+              ok[i] = false;
+              pending_records[i].channels = {{"error", e.what()}};
+            }
+          }
+        }
+        const double per_curve = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() /
+                                 static_cast<double>(pending.size());
+        for (size_t i = 0; i < pending.size(); ++i) {
+          auto& record = pending_records[i];
+          if (ok[i]) {
+            record.objective2 = results[i].fitness;
+            record.fitness = results[i].fitness;
+            record.channels = results[i].channels;
+          }
+          record.wall_time_s += per_curve;
+          archive.put_fitness(record);
+        }
+      }
+      for (size_t c = 0; c < candidates.size(); ++c)
+        if (std::isnan(case_fitness[c][k])) {
+          if (auto f = archive.find_fitness(run_ids[c][k], prepared.objective_keys[k])) case_fitness[c][k] = f->fitness;
+        }
+    }
+
+    std::vector<double> fitness(candidates.size(), 0.0);
+    std::vector<EvaluationRecord> evaluations;
+    for (size_t c = 0; c < candidates.size(); ++c) {
+      for (size_t k = 0; k < cases; ++k) fitness[c] += config.cases[k].weight * case_fitness[c][k];
+      EvaluationRecord e;
+      e.campaign_id = campaign_id;
+      e.iteration = iteration;
+      e.position = static_cast<int>(c);
+      e.params = candidates[c];
+      e.run_ids = run_ids[c];
+      e.fitness = fitness[c];
+      evaluations.push_back(std::move(e));
+    }
+    optimiser->tell(fitness);
+    IterationRecord record;
+    record.campaign_id = campaign_id;
+    record.iteration = iteration;
+    record.optimiser_state = optimiser->save_state().dump();
+    record.best_fitness = optimiser->best_value();
+    record.evaluations = static_cast<int>(optimiser->evaluations());
+    record.wall_time_s = elapsed();
+    archive.commit_iteration(record, evaluations);
+    progress.best = optimiser->best_value();
+    progress.elapsed_s = elapsed();
+    printer.iteration_done(progress);
+  }
+  printer.finish();
+
+  // The result comes from the archive, so a resumed campaign reports exactly what an uninterrupted
+  // one would.
+  const auto evaluations = archive.evaluations(campaign_id);
+  double best = INFINITY;
+  for (const auto& e : evaluations) {
+    ParameterSet s{e.params, e.fitness, e.iteration, e.position};
+    result.all.push_back(s);
+    if (std::isfinite(e.fitness) && e.fitness < best) {
+      best = e.fitness;
+      result.best = s;
+    }
+    if (!std::isfinite(e.fitness)) ++result.failed_runs;
+    result.best_history.push_back(best);
+  }
+  result.candidates = static_cast<long>(evaluations.size());
+  result.simulations = result.candidates * static_cast<long>(cases);
+  result.iterations = evaluations.empty() ? 0 : evaluations.back().iteration + 1;
+  result.top = top_distinct(result.all, 5);
+  result.optimiser_status = optimise::to_string(optimiser->status());
+  if (!std::isfinite(best)) {
+    result.status = CampaignStatus::failed;
+    result.message = "no run gave a finite fitness (" + std::to_string(result.failed_runs) + " failed)";
+  }
+  result.wall_time_s = elapsed();
+
+  json out = result.to_json();
+  out["name"] = config.name;
+  out["code_version"] = version();
+  out["objective"] = config.objective;
+  out["algorithm"] = config.optimiser.algorithm;
+  out["seed"] = config.optimiser.seed;
+  out["archive"] = archive.path();
+  out["session"]["campaign_id"] = campaign_id;
+  out["session"]["backend"] = backend->name();
+  {
+    std::ofstream file(fs::path(config.output) / "result.json");
+    file << out.dump(2) << "\n";
+    if (!file) throw CampaignError(config.output + "/result.json: cannot write");
+  }
+
+  if (config.report && result.status == CampaignStatus::completed) {
+    ReportInputs inputs;
+    inputs.config = &config;
+    inputs.result = &result;
+    inputs.measured = prepared.measured;
+    const auto& best_eval = evaluations[static_cast<size_t>(
+        std::find_if(evaluations.begin(), evaluations.end(),
+                     [&](const EvaluationRecord& e) {
+                       return e.iteration == result.best.iteration && e.position == result.best.position;
+                     }) -
+        evaluations.begin())];
+    for (size_t k = 0; k < cases; ++k) {
+      inputs.best_runs.push_back(*archive.run(best_eval.run_ids[k]));
+      if (config.objective == 2) {
+        inputs.smoothed_measured.push_back(prepared.objective2[k]->smoothed_experiment());
+        try {
+          inputs.smoothed_best.push_back(prepared.objective2[k]->smooth_simulation(inputs.best_runs.back().curves));
+        } catch (const std::exception&) {
+          inputs.smoothed_best.emplace_back();
+        }
+      }
+    }
+    write_report(inputs, config.output);
+  }
+  return result;
+}
+
+void run_mpi_worker(const CampaignConfig& config) {
+  config.Validate();
+  mpi_serve(build_scenes(config));
+}
+
+}  // namespace demcal::pipelines

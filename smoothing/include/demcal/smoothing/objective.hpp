@@ -1,0 +1,93 @@
+// Objective functions 1 and 2 (paper eqs. 16–20): the misfit between a measured and a simulated
+// curve, summed over channels.
+//
+// Channel convention (both files): one column named `force_column` ("force"); every other column,
+// except those in `ignored_columns` ("time"), is a displacement. The channels are the displacement
+// columns present in both curves (an error if there is none). Fitness is in the files' force unit.
+//
+// Objective 1, per channel c (force F against displacement w):
+//   1. each curve is reduced to its loading envelope (rows with NaN in w or F dropped; a point is
+//      kept only where w exceeds every earlier w, and a point at the same w as the last kept point
+//      replaces it, so the latest force at a repeated displacement counts). Unloading, cycles and
+//      snap-back therefore do not enter the fitness: the monotonic loading branch is compared.
+//   2. window: lower = max(min w_exp, min w_sim), upper = min(max w_exp, max w_sim); error if upper
+//      <= lower (the curves share no displacement range).
+//   3. `points` (200) evenly spaced w in [lower, upper], both ends included; F_exp and F_sim
+//      linearly interpolated there.
+//   4. f_c = sqrt(sum_k (F_exp,k - F_sim,k)^2).
+// fitness = sum_c weight_c f_c (weights default to 1).
+// Objective 2 is objective 1 applied to the neural smoother's 200-point fits of both curves
+// (smoother.hpp); the measured curves are smoothed once when an Objective2 is built.
+#pragma once
+
+#include "demcal/smoothing/curve.hpp"
+#include "demcal/smoothing/smoother.hpp"
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace demcal::smoothing {
+
+struct ObjectiveOptions {
+  int points = 200;                                   // evaluation points per channel, >= 2
+  std::map<std::string, double> channel_weights;      // per displacement column; absent = 1, >= 0
+  std::string force_column = "force";
+  std::vector<std::string> ignored_columns = {"time"};  // neither force nor displacement
+  // Throws std::invalid_argument naming the bad field and value.
+  void Validate() const;
+};
+
+struct FitnessResult {
+  double fitness = 0;                        // weighted sum of the channel values
+  std::map<std::string, double> channels;    // unweighted f_c per displacement column
+};
+
+// Displacement columns of a curve under the convention above (file order). Throws CurveError if
+// the force column is missing.
+std::vector<std::string> displacement_columns(const Curve& curve, const ObjectiveOptions& options);
+// Displacement columns present in both curves (experiment's order). Throws CurveError naming both
+// files and their columns when there is none in common.
+std::vector<std::string> common_channels(const Curve& experiment, const Curve& simulation,
+                                         const ObjectiveOptions& options);
+
+// The loading envelope of step 1: strictly increasing x, NaN rows dropped.
+XYSeries loading_envelope(const XYSeries& series);
+// Linear interpolation of a strictly increasing series at x (clamped to the end values outside).
+double interpolate(const XYSeries& envelope, double x);
+
+// f_c of one channel from two series (steps 1–4). Throws CurveError (naming `label`) when a series
+// has fewer than 2 envelope points or the windows do not overlap.
+double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
+                      const std::string& label = "channel");
+
+// Objective 1 (eqs. 16–20). Throws CurveError on missing force column, no common channel, a weight
+// naming no common channel, non-overlapping windows.
+FitnessResult objective1(const Curve& experiment, const Curve& simulation,
+                         const ObjectiveOptions& options = {});
+
+// Objective 2 with the measured curves smoothed once, in the constructor.
+class Objective2 {
+ public:
+  Objective2(const Curve& experiment, ObjectiveOptions objective = {}, SmootherOptions smoother = {});
+
+  // Smooths the simulation's channels (one batched training pass) and applies objective 1.
+  FitnessResult evaluate(const Curve& simulation) const;
+  // All simulations' channels in ONE batched training pass (e.g. ten particles x two channels).
+  std::vector<FitnessResult> evaluate_batch(const std::vector<Curve>& simulations) const;
+
+  // The smoothed measured curve of each displacement column of the experiment.
+  const std::map<std::string, XYSeries>& smoothed_experiment() const { return smoothed_experiment_; }
+  // The smoothed channels of a simulation, as evaluate uses them (for plots and reports).
+  std::map<std::string, XYSeries> smooth_simulation(const Curve& simulation) const;
+  const ObjectiveOptions& objective_options() const { return objective_; }
+  const SmootherOptions& smoother_options() const { return smoother_; }
+
+ private:
+  ObjectiveOptions objective_;
+  SmootherOptions smoother_;
+  Curve experiment_;  // columns only, for channel matching and messages
+  std::map<std::string, XYSeries> smoothed_experiment_;
+};
+
+}  // namespace demcal::smoothing

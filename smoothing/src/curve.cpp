@@ -1,0 +1,382 @@
+// Curve reading and writing (see curve.hpp for the accepted format).
+#include "demcal/smoothing/curve.hpp"
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <set>
+#include <sstream>
+
+namespace demcal::smoothing {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+bool valid_utf8(const std::string& s) {
+  std::size_t i = 0;
+  while (i < s.size()) {
+    const auto c = static_cast<unsigned char>(s[i]);
+    if (c < 0x80) {
+      ++i;
+      continue;
+    }
+    const std::size_t extra = (c >> 5) == 0x6 ? 1 : (c >> 4) == 0xE ? 2 : (c >> 3) == 0x1E ? 3 : 0;
+    if (extra == 0 || i + extra >= s.size()) return false;
+    for (std::size_t k = 1; k <= extra; ++k)
+      if ((static_cast<unsigned char>(s[i + k]) >> 6) != 0x2) return false;
+    i += extra + 1;
+  }
+  return true;
+}
+
+std::string latin1_to_utf8(const std::string& s) {
+  std::string out;
+  for (char ch : s) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c < 0x80) {
+      out += ch;
+    } else {
+      out += static_cast<char>(0xC0 | (c >> 6));
+      out += static_cast<char>(0x80 | (c & 0x3F));
+    }
+  }
+  return out;
+}
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\r\n");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return s.substr(b, e - b + 1);
+}
+
+std::string unquote(std::string s) {
+  s = trim(s);
+  if (s.size() >= 2 && ((s.front() == '"' && s.back() == '"') || (s.front() == '\'' && s.back() == '\'')))
+    s = trim(s.substr(1, s.size() - 2));
+  return s;
+}
+
+std::vector<std::string> split(const std::string& line, char sep) {
+  std::vector<std::string> cells;
+  std::string cell;
+  bool quoted = false;
+  for (char c : line) {
+    if (c == '"') quoted = !quoted;
+    if (c == sep && !quoted) {
+      cells.push_back(cell);
+      cell.clear();
+    } else {
+      cell += c;
+    }
+  }
+  cells.push_back(cell);
+  return cells;
+}
+
+enum class CellKind { number, nan, empty, text };
+
+// Parses one cell; `decimal_comma` accepts "0,23".
+CellKind parse_cell(const std::string& raw, bool decimal_comma, double* value) {
+  std::string s = unquote(raw);
+  if (s.empty()) {
+    *value = kNaN;
+    return CellKind::empty;
+  }
+  std::string lower = s;
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (lower == "nan" || lower == "-nan" || lower == "na" || lower == "n/a") {
+    *value = kNaN;
+    return CellKind::nan;
+  }
+  if (decimal_comma) std::replace(s.begin(), s.end(), ',', '.');
+  const char* begin = s.data();
+  if (*begin == '+') ++begin;
+  double v = 0;
+  const auto [ptr, ec] = std::from_chars(begin, s.data() + s.size(), v);
+  if (ec != std::errc() || ptr != s.data() + s.size()) return CellKind::text;
+  if (!std::isfinite(v)) return CellKind::text;  // "inf" is not a measurement
+  *value = v;
+  return CellKind::number;
+}
+
+bool is_data_line(const std::vector<std::string>& cells, bool decimal_comma) {
+  if (cells.size() < 2) return false;
+  bool any_number = false;
+  for (const auto& c : cells) {
+    double v;
+    const auto kind = parse_cell(c, decimal_comma, &v);
+    if (kind == CellKind::text) return false;
+    any_number = any_number || kind == CellKind::number;
+  }
+  return any_number;
+}
+
+bool is_units_row(const std::vector<std::string>& cells) {
+  bool any = false;
+  for (const auto& raw : cells) {
+    const std::string c = unquote(raw);
+    if (c.empty()) continue;
+    const bool bracketed = (c.front() == '[' && c.back() == ']') || (c.front() == '(' && c.back() == ')');
+    if (!bracketed) return false;
+    any = true;
+  }
+  return any;
+}
+
+std::string strip_unit_brackets(const std::string& raw) {
+  std::string c = unquote(raw);
+  if (c.size() >= 2 && (c.front() == '[' || c.front() == '(')) c = trim(c.substr(1, c.size() - 2));
+  return c;
+}
+
+// "displacement [mm]" -> name "displacement", unit "mm".
+void split_name_unit(const std::string& raw, std::string* name, std::string* unit) {
+  std::string c = unquote(raw);
+  unit->clear();
+  if (!c.empty() && (c.back() == ']' || c.back() == ')')) {
+    const char open = c.back() == ']' ? '[' : '(';
+    const auto pos = c.rfind(open);
+    if (pos != std::string::npos && pos > 0) {
+      *unit = trim(c.substr(pos + 1, c.size() - pos - 2));
+      c = trim(c.substr(0, pos));
+    }
+  }
+  *name = c;
+}
+
+std::string shown(const std::string& cell) {
+  return "'" + trim(cell) + "'";
+}
+
+}  // namespace
+
+const Column& Curve::column(const std::string& name) const {
+  for (const auto& c : columns)
+    if (c.name == name) return c;
+  std::string names;
+  for (const auto& c : columns) names += (names.empty() ? "" : ", ") + c.name;
+  throw CurveError(source + ": no column '" + name + "' (columns: " + (names.empty() ? "none" : names) + ")");
+}
+
+Column& Curve::column(const std::string& name) {
+  return const_cast<Column&>(static_cast<const Curve&>(*this).column(name));
+}
+
+bool Curve::has_column(const std::string& name) const {
+  return std::any_of(columns.begin(), columns.end(), [&](const Column& c) { return c.name == name; });
+}
+
+std::vector<std::string> Curve::column_names() const {
+  std::vector<std::string> out;
+  for (const auto& c : columns) out.push_back(c.name);
+  return out;
+}
+
+std::size_t Curve::rows() const { return columns.empty() ? 0 : columns.front().values.size(); }
+
+Curve parse_curve(const std::string& text, const std::string& source, const CurveReadOptions& options) {
+  // Lines, converted to UTF-8, with their 1-based numbers.
+  std::vector<std::pair<std::size_t, std::string>> lines;
+  {
+    std::size_t start = 0, number = 0;
+    while (start <= text.size()) {
+      auto end = text.find('\n', start);
+      if (end == std::string::npos) end = text.size();
+      std::string line = text.substr(start, end - start);
+      ++number;
+      if (number == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line = line.substr(3);
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (!valid_utf8(line)) line = latin1_to_utf8(line);
+      if (!trim(line).empty()) lines.emplace_back(number, line);
+      start = end + 1;
+    }
+  }
+  if (lines.empty()) throw CurveError(source + ": empty file (no header, no data)");
+
+  // Separator and first data line: the first candidate separator that yields a line of >= 2
+  // numeric cells wins.
+  const std::vector<char> candidates =
+      options.separator ? std::vector<char>{options.separator} : std::vector<char>{'\t', ';', ','};
+  char sep = 0;
+  bool decimal_comma = false;
+  std::size_t first_data = lines.size();
+  for (char c : candidates) {
+    for (bool dc : {false, true}) {
+      if (dc && c == ',') continue;
+      for (std::size_t i = 0; i < lines.size(); ++i) {
+        if (is_data_line(split(lines[i].second, c), dc)) {
+          if (i < first_data || (i == first_data && !sep)) {
+            first_data = i;
+            sep = c;
+            decimal_comma = dc;
+          }
+          break;
+        }
+      }
+      if (sep) break;
+    }
+    if (sep) break;
+  }
+
+  if (!sep) {
+    // No numeric row at all: report the first line after the header that is not numeric.
+    const auto& [number, line] = lines.size() > 1 ? lines[1] : lines[0];
+    if (lines.size() == 1)
+      throw CurveError(source + ": line " + std::to_string(lines[0].first) + ": no data rows (only a header)");
+    throw CurveError(source + ": line " + std::to_string(number) + ": no numeric data rows found (first: '" +
+                     trim(line) + "')");
+  }
+
+  // Header: [preamble...] names [units] data...
+  Curve curve;
+  curve.source = source;
+  if (first_data == 0) throw CurveError(source + ": line " + std::to_string(lines[0].first) + ": no column names before the data");
+  std::size_t names_index = first_data - 1;
+  std::vector<std::string> units;
+  if (is_units_row(split(lines[names_index].second, sep))) {
+    units = split(lines[names_index].second, sep);
+    if (names_index == 0)
+      throw CurveError(source + ": line " + std::to_string(lines[0].first) + ": a units row but no column names");
+    --names_index;
+  }
+  const auto name_cells = split(lines[names_index].second, sep);
+  const std::size_t line_of_names = lines[names_index].first;
+  // A "names" row that holds a number is a data row with a bad cell (e.g. the first data row).
+  for (std::size_t j = 0; j < name_cells.size(); ++j) {
+    double v;
+    if (parse_cell(name_cells[j], decimal_comma, &v) == CellKind::number && name_cells.size() > 1) {
+      for (std::size_t k = 0; k < name_cells.size(); ++k)
+        if (parse_cell(name_cells[k], decimal_comma, &v) == CellKind::text)
+          throw CurveError(source + ": line " + std::to_string(line_of_names) + ", column " +
+                           std::to_string(k + 1) + ": non-numeric value " + shown(name_cells[k]) +
+                           " (no column names found above it)");
+    }
+  }
+  for (std::size_t i = 0; i < names_index; ++i) curve.preamble.push_back(lines[i].second);
+
+  std::set<std::string> seen;
+  for (std::size_t j = 0; j < name_cells.size(); ++j) {
+    Column col;
+    split_name_unit(name_cells[j], &col.name, &col.unit);
+    if (j < units.size() && !trim(units[j]).empty()) col.unit = strip_unit_brackets(units[j]);
+    if (col.name.empty())
+      throw CurveError(source + ": line " + std::to_string(line_of_names) + ", column " + std::to_string(j + 1) +
+                       ": empty column name");
+    if (!seen.insert(col.name).second)
+      throw CurveError(source + ": line " + std::to_string(line_of_names) + ", column " + std::to_string(j + 1) +
+                       ": duplicate column name '" + col.name + "'");
+    curve.columns.push_back(std::move(col));
+  }
+  if (!units.empty() && units.size() != name_cells.size())
+    throw CurveError(source + ": line " + std::to_string(lines[names_index + 1].first) + ": " +
+                     std::to_string(units.size()) + " units for " + std::to_string(name_cells.size()) + " columns");
+
+  const std::size_t ncol = curve.columns.size();
+  std::size_t finite_rows = 0;
+  for (std::size_t i = first_data; i < lines.size(); ++i) {
+    auto cells = split(lines[i].second, sep);
+    while (cells.size() > ncol && trim(cells.back()).empty()) cells.pop_back();  // trailing separator
+    if (cells.size() != ncol)
+      throw CurveError(source + ": line " + std::to_string(lines[i].first) + ": " + std::to_string(cells.size()) +
+                       " cells, expected " + std::to_string(ncol) + " (columns: " + [&] {
+                         std::string s;
+                         for (const auto& c : curve.columns) s += (s.empty() ? "" : ", ") + c.name;
+                         return s;
+                       }() + ")");
+    bool all_finite = true;
+    for (std::size_t j = 0; j < ncol; ++j) {
+      double v;
+      if (parse_cell(cells[j], decimal_comma, &v) == CellKind::text)
+        throw CurveError(source + ": line " + std::to_string(lines[i].first) + ", column '" + curve.columns[j].name +
+                         "': non-numeric value " + shown(cells[j]));
+      all_finite = all_finite && std::isfinite(v);
+      curve.columns[j].values.push_back(v);
+    }
+    if (all_finite) ++finite_rows;
+  }
+  if (options.reject_all_nan_columns)
+    for (const auto& c : curve.columns)
+      if (std::none_of(c.values.begin(), c.values.end(), [](double v) { return std::isfinite(v); }))
+        throw CurveError(source + ": column '" + c.name + "' (line " + std::to_string(line_of_names) +
+                         "): every value is NaN or empty");
+  if (finite_rows < options.min_rows)
+    throw CurveError(source + ": line " + std::to_string(lines[first_data].first) + ": " + std::to_string(finite_rows) +
+                     " data row" + (finite_rows == 1 ? "" : "s") + " with finite values, at least " +
+                     std::to_string(options.min_rows) + " needed");
+  return curve;
+}
+
+Curve read_curve(const std::string& path, const CurveReadOptions& options) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw CurveError(path + ": cannot open the file for reading");
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  if (in.bad()) throw CurveError(path + ": read error");
+  return parse_curve(buffer.str(), path, options);
+}
+
+std::string format_curve(const Curve& curve) {
+  const std::size_t n = curve.rows();
+  for (const auto& c : curve.columns) {
+    if (c.values.size() != n)
+      throw CurveError(curve.source + ": column '" + c.name + "' has " + std::to_string(c.values.size()) +
+                       " values, others " + std::to_string(n));
+    if (c.name.empty() || c.name.find_first_of(",;\t\"\n\r[]") != std::string::npos)
+      throw CurveError(curve.source + ": column name '" + c.name + "' cannot be written (empty, or holds a separator, quote, bracket or newline)");
+  }
+  std::string out;
+  for (const auto& line : curve.preamble) out += line + "\n";
+  bool any_unit = false;
+  for (std::size_t j = 0; j < curve.columns.size(); ++j) {
+    out += (j ? "," : "") + curve.columns[j].name;
+    any_unit = any_unit || !curve.columns[j].unit.empty();
+  }
+  out += "\n";
+  if (any_unit) {
+    for (std::size_t j = 0; j < curve.columns.size(); ++j) out += std::string(j ? "," : "") + "[" + curve.columns[j].unit + "]";
+    out += "\n";
+  }
+  std::array<char, 64> buf{};
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = 0; j < curve.columns.size(); ++j) {
+      if (j) out += ',';
+      const double v = curve.columns[j].values[i];
+      if (std::isnan(v)) {
+        out += "nan";
+      } else {
+        const auto [ptr, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v);
+        out.append(buf.data(), ptr);
+      }
+    }
+    out += '\n';
+  }
+  return out;
+}
+
+void write_curve(const Curve& curve, const std::string& path) {
+  const std::string text = format_curve(curve);
+  std::ofstream out(path, std::ios::binary);
+  if (!out) throw CurveError(path + ": cannot open the file for writing");
+  out << text;
+  if (!out) throw CurveError(path + ": write error");
+}
+
+XYSeries series(const Curve& curve, const std::string& x_column, const std::string& y_column) {
+  const auto& xc = curve.column(x_column);
+  const auto& yc = curve.column(y_column);
+  XYSeries s;
+  for (std::size_t i = 0; i < xc.values.size() && i < yc.values.size(); ++i) {
+    if (std::isnan(xc.values[i]) || std::isnan(yc.values[i])) continue;
+    s.x.push_back(xc.values[i]);
+    s.y.push_back(yc.values[i]);
+  }
+  return s;
+}
+
+}  // namespace demcal::smoothing

@@ -1,0 +1,85 @@
+// The LibTorch training backend: the only translation unit of the module that includes LibTorch.
+//
+// All networks of a batch are stacked along a leading "curve" dimension and every layer is one
+// batched matrix product (bmm). Backpropagation is written out under NoGradGuard instead of using
+// autograd, and one flat parameter tensor gets a fused Adam update: this keeps the number of LibTorch
+// calls per epoch at about 60, whatever the batch size.
+#include "mlp_training.hpp"
+
+#include <torch/torch.h>
+
+namespace demcal::smoothing::detail {
+
+TrainingOutput train_libtorch(const TrainingBatch& tb, const SmootherOptions& options) {
+  torch::NoGradGuard no_grad;
+  const int previous_threads = torch::get_num_threads();
+  torch::set_num_threads(options.threads);
+
+  const std::int64_t batch = tb.curves, n = tb.points, total = tb.parameter_count;
+  const auto f32 = torch::TensorOptions().dtype(torch::kFloat32);
+  torch::Tensor x = torch::from_blob(const_cast<float*>(tb.x.data()), {batch, n, 1}, f32).clone();
+  torch::Tensor target = torch::from_blob(const_cast<float*>(tb.y.data()), {batch, n, 1}, f32).clone();
+  torch::Tensor params = torch::from_blob(const_cast<float*>(tb.initial_parameters.data()), {1, total}, f32)
+                             .expand({batch, total}).contiguous();
+  torch::Tensor adam_m = torch::zeros_like(params);
+  torch::Tensor adam_v = torch::zeros_like(params);
+
+  const std::size_t layers = tb.layers.size();
+  std::vector<torch::Tensor> weight(layers), bias(layers), weight_t(layers);
+  for (std::size_t l = 0; l < layers; ++l) {
+    const auto& s = tb.layers[l];
+    weight[l] = params.narrow(1, s.weight_offset, s.in * s.out).view({batch, s.in, s.out});
+    bias[l] = params.narrow(1, s.bias_offset, s.out).view({batch, 1, s.out});
+    weight_t[l] = weight[l].transpose(1, 2);
+  }
+
+  std::vector<torch::Tensor> activation(layers);  // input of layer l
+  std::vector<torch::Tensor> grads(2 * layers);
+  const float inv_n = 1.0f / static_cast<float>(n);
+  auto forward = [&]() {
+    activation[0] = x;
+    torch::Tensor h = x;
+    for (std::size_t l = 0; l < layers; ++l) {
+      torch::Tensor z = torch::baddbmm(bias[l], h, weight[l]);
+      if (l + 1 < layers) {
+        h = z.tanh_();
+        activation[l + 1] = h;
+      } else {
+        h = z;
+      }
+    }
+    return h;
+  };
+
+  for (int epoch = 0; epoch < options.epochs; ++epoch) {
+    torch::Tensor output = forward();
+    // d(mean |y - t|)/dy per curve: the loss is summed over curves, so each network sees only its own.
+    torch::Tensor delta = (output - target).sign_().mul_(inv_n);
+    for (std::size_t l = layers; l-- > 0;) {
+      grads[2 * l] = torch::bmm(activation[l].transpose(1, 2), delta).view({batch, -1});
+      grads[2 * l + 1] = delta.sum(1);
+      if (l > 0) {
+        const torch::Tensor& h = activation[l];
+        delta = torch::bmm(delta, weight_t[l]).mul_(1 - h * h);
+      }
+    }
+    torch::Tensor g = torch::cat(grads, 1);  // the flat layout W0, b0, W1, b1, ...
+    const double t = epoch + 1;
+    const double correction1 = 1 - std::pow(kAdamBeta1, t);
+    const double correction2 = 1 - std::pow(kAdamBeta2, t);
+    adam_m.mul_(kAdamBeta1).add_(g, 1 - kAdamBeta1);
+    adam_v.mul_(kAdamBeta2).addcmul_(g, g, 1 - kAdamBeta2);
+    torch::Tensor denom = (adam_v / correction2).sqrt_().add_(kAdamEpsilon);
+    params.addcdiv_(adam_m, denom, -learning_rate_at(options, epoch) / correction1);
+  }
+
+  torch::Tensor output = forward().contiguous();
+  torch::Tensor loss = (output - target).abs_().mean(1).contiguous();
+  TrainingOutput out;
+  out.prediction.assign(output.data_ptr<float>(), output.data_ptr<float>() + batch * n);
+  out.loss.assign(loss.data_ptr<float>(), loss.data_ptr<float>() + batch);
+  torch::set_num_threads(previous_threads);
+  return out;
+}
+
+}  // namespace demcal::smoothing::detail

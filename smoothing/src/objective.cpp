@@ -1,0 +1,224 @@
+// Loading envelope, interpolation, objective functions 1 and 2.
+#include "demcal/smoothing/objective.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+namespace demcal::smoothing {
+
+namespace {
+
+std::string join(const std::vector<std::string>& names) {
+  std::string out;
+  for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out.empty() ? "none" : out;
+}
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s.precision(10);
+  s << v;
+  return s.str();
+}
+
+}  // namespace
+
+void ObjectiveOptions::Validate() const {
+  if (points < 2)
+    throw std::invalid_argument("ObjectiveOptions.points = " + std::to_string(points) + ": must be >= 2");
+  if (force_column.empty()) throw std::invalid_argument("ObjectiveOptions.force_column is empty");
+  for (const auto& [name, w] : channel_weights)
+    if (!(w >= 0) || !std::isfinite(w))
+      throw std::invalid_argument("ObjectiveOptions.channel_weights['" + name + "'] = " + fmt(w) +
+                                  ": must be finite and >= 0");
+  for (const auto& name : ignored_columns)
+    if (name == force_column)
+      throw std::invalid_argument("ObjectiveOptions.ignored_columns contains the force column '" +
+                                  name + "'");
+}
+
+XYSeries loading_envelope(const XYSeries& s) {
+  if (s.x.size() != s.y.size())
+    throw CurveError("loading_envelope: x and y differ in length (" + std::to_string(s.x.size()) +
+                     " and " + std::to_string(s.y.size()) + ")");
+  XYSeries env;
+  for (std::size_t i = 0; i < s.x.size(); ++i) {
+    const double x = s.x[i], y = s.y[i];
+    if (!std::isfinite(x) || !std::isfinite(y)) continue;
+    if (env.x.empty() || x > env.x.back()) {
+      env.x.push_back(x);
+      env.y.push_back(y);
+    } else if (x == env.x.back()) {
+      env.y.back() = y;  // the latest force at a repeated displacement
+    }
+  }
+  return env;
+}
+
+double interpolate(const XYSeries& e, double x) {
+  if (e.x.empty()) throw CurveError("interpolate: empty series");
+  if (x <= e.x.front()) return e.y.front();
+  if (x >= e.x.back()) return e.y.back();
+  const auto it = std::upper_bound(e.x.begin(), e.x.end(), x);
+  const std::size_t i = static_cast<std::size_t>(it - e.x.begin());  // e.x[i-1] <= x < e.x[i]
+  const double t = (x - e.x[i - 1]) / (e.x[i] - e.x[i - 1]);
+  return e.y[i - 1] + t * (e.y[i] - e.y[i - 1]);
+}
+
+double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
+                      const std::string& label) {
+  if (points < 2) throw std::invalid_argument("channel_misfit: points must be >= 2");
+  const XYSeries e = loading_envelope(experiment);
+  const XYSeries s = loading_envelope(simulation);
+  if (e.x.size() < 2)
+    throw CurveError(label + ": the experiment has fewer than 2 loading points (finite, increasing displacement)");
+  if (s.x.size() < 2)
+    throw CurveError(label + ": the simulation has fewer than 2 loading points (finite, increasing displacement)");
+  const double lower = std::max(e.x.front(), s.x.front());
+  const double upper = std::min(e.x.back(), s.x.back());
+  if (!(upper > lower))
+    throw CurveError(label + ": displacement ranges do not overlap (experiment [" + fmt(e.x.front()) +
+                     ", " + fmt(e.x.back()) + "], simulation [" + fmt(s.x.front()) + ", " +
+                     fmt(s.x.back()) + "])");
+  double sum = 0;
+  for (int k = 0; k < points; ++k) {
+    const double w = k == points - 1 ? upper : lower + (upper - lower) * k / (points - 1);
+    const double d = interpolate(e, w) - interpolate(s, w);
+    sum += d * d;
+  }
+  return std::sqrt(sum);
+}
+
+std::vector<std::string> displacement_columns(const Curve& curve, const ObjectiveOptions& options) {
+  if (!curve.has_column(options.force_column))
+    throw CurveError(curve.source + ": no force column '" + options.force_column + "' (columns: " +
+                     join(curve.column_names()) + ")");
+  std::vector<std::string> out;
+  for (const auto& c : curve.columns) {
+    if (c.name == options.force_column) continue;
+    if (std::find(options.ignored_columns.begin(), options.ignored_columns.end(), c.name) !=
+        options.ignored_columns.end())
+      continue;
+    out.push_back(c.name);
+  }
+  return out;
+}
+
+std::vector<std::string> common_channels(const Curve& experiment, const Curve& simulation,
+                                         const ObjectiveOptions& options) {
+  const auto e = displacement_columns(experiment, options);
+  const auto s = displacement_columns(simulation, options);
+  std::vector<std::string> common;
+  for (const auto& name : e)
+    if (std::find(s.begin(), s.end(), name) != s.end()) common.push_back(name);
+  if (common.empty())
+    throw CurveError("no displacement column in common: " + experiment.source + " has (" + join(e) +
+                     "), " + simulation.source + " has (" + join(s) + ")");
+  return common;
+}
+
+namespace {
+
+void check_weights(const std::vector<std::string>& channels, const ObjectiveOptions& options) {
+  for (const auto& [name, w] : options.channel_weights)
+    if (std::find(channels.begin(), channels.end(), name) == channels.end())
+      throw CurveError("channel weight given for '" + name + "', which is not a common channel (" +
+                       join(channels) + ")");
+}
+
+double weight_of(const ObjectiveOptions& options, const std::string& channel) {
+  const auto it = options.channel_weights.find(channel);
+  return it == options.channel_weights.end() ? 1.0 : it->second;
+}
+
+FitnessResult combine(const std::map<std::string, double>& channels, const ObjectiveOptions& options) {
+  FitnessResult r;
+  r.channels = channels;
+  for (const auto& [name, f] : channels) r.fitness += weight_of(options, name) * f;
+  return r;
+}
+
+std::string channel_label(const Curve& experiment, const Curve& simulation, const std::string& channel) {
+  return "channel '" + channel + "' (" + experiment.source + " vs " + simulation.source + ")";
+}
+
+}  // namespace
+
+FitnessResult objective1(const Curve& experiment, const Curve& simulation, const ObjectiveOptions& options) {
+  options.Validate();
+  const auto channels = common_channels(experiment, simulation, options);
+  check_weights(channels, options);
+  std::map<std::string, double> values;
+  for (const auto& c : channels)
+    values[c] = channel_misfit(series(experiment, c, options.force_column),
+                               series(simulation, c, options.force_column), options.points,
+                               channel_label(experiment, simulation, c));
+  return combine(values, options);
+}
+
+Objective2::Objective2(const Curve& experiment, ObjectiveOptions objective, SmootherOptions smoother)
+    : objective_(std::move(objective)), smoother_(std::move(smoother)) {
+  objective_.Validate();
+  smoother_.Validate();
+  experiment_.source = experiment.source;
+  experiment_.columns = experiment.columns;
+  const auto channels = displacement_columns(experiment, objective_);
+  if (channels.empty())
+    throw CurveError(experiment.source + ": no displacement column besides '" + objective_.force_column + "'");
+  std::vector<XYSeries> inputs;
+  for (const auto& c : channels) inputs.push_back(series(experiment, c, objective_.force_column));
+  const auto results = smooth_batch(inputs, smoother_);
+  for (std::size_t i = 0; i < channels.size(); ++i) {
+    if (results[i].status != SmoothStatus::ok)
+      throw CurveError(experiment.source + ": cannot smooth channel '" + channels[i] + "': " + results[i].message);
+    smoothed_experiment_[channels[i]] = results[i].smoothed;
+  }
+}
+
+std::vector<FitnessResult> Objective2::evaluate_batch(const std::vector<Curve>& simulations) const {
+  // Gather every channel of every simulation, then one batched training pass.
+  std::vector<std::vector<std::string>> channels(simulations.size());
+  std::vector<XYSeries> inputs;
+  for (std::size_t i = 0; i < simulations.size(); ++i) {
+    channels[i] = common_channels(experiment_, simulations[i], objective_);
+    check_weights(channels[i], objective_);
+    for (const auto& c : channels[i]) inputs.push_back(series(simulations[i], c, objective_.force_column));
+  }
+  const auto smoothed = smooth_batch(inputs, smoother_);
+  std::vector<FitnessResult> out;
+  std::size_t next = 0;
+  for (std::size_t i = 0; i < simulations.size(); ++i) {
+    std::map<std::string, double> values;
+    for (const auto& c : channels[i]) {
+      const auto& r = smoothed[next++];
+      const std::string label = channel_label(experiment_, simulations[i], c);
+      if (r.status != SmoothStatus::ok) throw CurveError(label + ": cannot smooth the simulation: " + r.message);
+      values[c] = channel_misfit(smoothed_experiment_.at(c), r.smoothed, objective_.points, label);
+    }
+    out.push_back(combine(values, objective_));
+  }
+  return out;
+}
+
+FitnessResult Objective2::evaluate(const Curve& simulation) const {
+  return evaluate_batch({simulation}).front();
+}
+
+std::map<std::string, XYSeries> Objective2::smooth_simulation(const Curve& simulation) const {
+  const auto channels = common_channels(experiment_, simulation, objective_);
+  std::vector<XYSeries> inputs;
+  for (const auto& c : channels) inputs.push_back(series(simulation, c, objective_.force_column));
+  const auto smoothed = smooth_batch(inputs, smoother_);
+  std::map<std::string, XYSeries> out;
+  for (std::size_t i = 0; i < channels.size(); ++i) {
+    if (smoothed[i].status != SmoothStatus::ok)
+      throw CurveError(simulation.source + ": cannot smooth channel '" + channels[i] + "': " + smoothed[i].message);
+    out[channels[i]] = smoothed[i].smoothed;
+  }
+  return out;
+}
+
+}  // namespace demcal::smoothing

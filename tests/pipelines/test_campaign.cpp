@@ -1,0 +1,316 @@
+// Campaigns end to end through the external-command backend (a small Python simulator in this
+// folder, not demcal code), bad input, and kill -9 / --resume through the demcal program.
+#include "demcal/pipelines/archive.hpp"
+#include "demcal/pipelines/backend.hpp"
+#include "demcal/pipelines/campaign.hpp"
+#include "demcal/pipelines/process.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+
+namespace fs = std::filesystem;
+using namespace demcal::pipelines;
+using nlohmann::json;
+
+namespace {
+
+const std::string kSimulator = std::string(DEMCAL_SOURCE_DIR) + "/tests/pipelines/toy_simulator.py";
+
+std::string python() { return fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3"; }
+
+fs::path fresh_dir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("demcal-test-campaign-" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+// The "measurement": the simulator at k = 2e7 N/m, friction 32 deg, with 20 N of noise.
+std::string make_measurement(const fs::path& dir) {
+  const std::string path = (dir / "measured.csv").string();
+  ProcessOptions o;
+  o.argv = {python(), kSimulator, "2e7", "32", path, "--noise", "20", "--seed", "7"};
+  o.timeout_s = 30;
+  EXPECT_TRUE(run_process(o).ok());
+  return path;
+}
+
+json toy_campaign(const fs::path& dir, const std::string& extra_args = "") {
+  return {{"name", "toy"},
+          {"measured", make_measurement(dir)},
+          {"parameters", {{{"name", "k"}, {"lower", 1e6}, {"upper", 1e8}, {"scale", "log"}},
+                          {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+          {"objective", 1},
+          {"optimiser", {{"algorithm", "tbpso"}, {"population", 8}, {"iterations", 8}, {"seed", 3}}},
+          {"backend", {{"type", "command"},
+                       {"command", python() + " " + kSimulator + " {k} {friction_deg} {output}" + extra_args},
+                       {"parallel", 2}}},
+          {"output", (dir / "out").string()},
+          {"report", false}};
+}
+
+json read_json(const fs::path& path) {
+  std::ifstream in(path);
+  return json::parse(in);
+}
+
+}  // namespace
+
+TEST(Campaign, ExternalCommandCalibrationRecoversTheHiddenParameters) {
+  const auto dir = fresh_dir("recover");
+  auto config_json = toy_campaign(dir);
+  config_json["report"] = true;
+  const CampaignConfig config = campaign_from_json(config_json, dir.string(), "toy.json");
+  RunOptions options;
+  options.progress = false;
+  const CampaignResult result = run_campaign(config, options);
+  EXPECT_EQ(result.status, CampaignStatus::completed);
+  EXPECT_EQ(result.simulations, 64);
+  // Candidates clamped onto the same bound corner are simulated once; the rest come from the archive.
+  EXPECT_EQ(result.simulated_this_session + result.reused_from_archive, 64);
+  EXPECT_EQ(RunArchive((dir / "out" / "archive.sqlite").string()).run_count(), result.simulated_this_session);
+  EXPECT_NEAR(result.best.params.at("friction_deg"), 32.0, 1.0);
+  EXPECT_NEAR(std::log10(result.best.params.at("k")), std::log10(2e7), 0.3);
+  ASSERT_EQ(result.top.size(), 5u);
+  for (size_t i = 1; i < result.top.size(); ++i) EXPECT_LE(result.top[i - 1].fitness, result.top[i].fitness);
+  const json written = read_json(dir / "out" / "result.json");
+  EXPECT_EQ(written["best"]["fitness"].get<double>(), result.best.fitness);
+  EXPECT_EQ(written["simulations"], 64);
+  EXPECT_EQ(written["top"].size(), 5u);
+  EXPECT_TRUE(fs::exists(dir / "out" / "report.md"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "figures" / "convergence.png"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "figures" / "parameters_k_friction_deg.png"));
+
+  // The same campaign again: every run comes from the archive, the result is the same.
+  const CampaignResult again = run_campaign(config, options);
+  EXPECT_EQ(again.simulated_this_session, 0);
+  EXPECT_EQ(again.reused_from_archive, 64);
+  EXPECT_EQ(again.top.size(), result.top.size());
+  EXPECT_EQ(again.best.fitness, result.best.fitness);
+  EXPECT_EQ(again.best.params, result.best.params);
+}
+
+TEST(Campaign, HangingAndCrashingRunsAreMarkedFailedAndTheCampaignGoesOn) {
+  const auto dir = fresh_dir("failures");
+  auto config_json = toy_campaign(dir, " --crash-above 30 --hang-above 36");
+  config_json["backend"]["timeout_s"] = 1.0;
+  config_json["optimiser"] = {{"algorithm", "pso"}, {"population", 6}, {"iterations", 2}, {"seed", 5}};
+  const CampaignConfig config = campaign_from_json(config_json, dir.string(), "toy.json");
+  RunOptions options;
+  options.progress = false;
+  const CampaignResult result = run_campaign(config, options);
+  EXPECT_EQ(result.status, CampaignStatus::completed);
+  EXPECT_EQ(result.simulations, 12);
+  int hung = 0, crashed = 0, fine = 0;
+  RunArchive archive((dir / "out" / "archive.sqlite").string());
+  for (const auto& s : result.all) {
+    const double phi = s.params.at("friction_deg");
+    const auto run = archive.find_run(CommandBackend(CommandBackendOptions{
+                                                         config.backend.command, 1, 1, (dir / "out" / "runs").string(),
+                                                         {"main"}, {""}, {"k", "friction_deg"}})
+                                          .model_hash(0),
+                                      s.params);
+    ASSERT_TRUE(run.has_value());
+    if (phi > 36) {
+      ++hung;
+      EXPECT_EQ(run->status, "failed");
+      EXPECT_NE(run->message.find("timeout"), std::string::npos) << run->message;
+      EXPECT_TRUE(std::isnan(s.fitness));
+    } else if (phi > 30) {
+      ++crashed;
+      EXPECT_EQ(run->status, "failed");
+      EXPECT_NE(run->message.find("signal 11"), std::string::npos) << run->message;
+      EXPECT_TRUE(std::isnan(s.fitness));
+    } else {
+      ++fine;
+      EXPECT_EQ(run->status, "completed");
+      EXPECT_TRUE(std::isfinite(s.fitness));
+    }
+  }
+  EXPECT_GT(hung, 0);
+  EXPECT_GT(crashed, 0);
+  EXPECT_GT(fine, 0);
+  EXPECT_EQ(result.failed_runs, hung + crashed);
+}
+
+TEST(Campaign, BadInputGivesMessagesNamingTheProblem) {
+  const auto dir = fresh_dir("bad");
+  auto expect_error = [&](json config_json, const std::string& needle) {
+    try {
+      const CampaignConfig config = campaign_from_json(config_json, dir.string(), "bad.json");
+      RunOptions options;
+      options.progress = false;
+      run_campaign(config, options);
+      ADD_FAILURE() << "no error for " << needle;
+    } catch (const std::exception& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  auto base = toy_campaign(dir);
+  auto inverted = base;
+  inverted["parameters"][1]["lower"] = 45;
+  inverted["parameters"][1]["upper"] = 25;
+  expect_error(inverted, "friction_deg");
+  auto missing = base;
+  missing["measured"] = (dir / "nope.csv").string();
+  expect_error(missing, "nope.csv");
+  auto placeholder = base;
+  placeholder["backend"]["command"] = "sim {kn} {output}";
+  expect_error(placeholder, "{kn}");
+  auto no_output = base;
+  no_output["backend"]["command"] = "sim {k}";
+  expect_error(no_output, "{output}");
+  auto unknown_key = base;
+  unknown_key["optimiser"]["swarm"] = 3;
+  expect_error(unknown_key, "swarm");
+  auto bad_objective = base;
+  bad_objective["objective"] = 3;
+  expect_error(bad_objective, "objective");
+  auto unknown_parameter = base;
+  unknown_parameter["backend"] = "threads";
+  unknown_parameter["scene"] = {{"generator", "arch"}, {"options", {{"contacts_per_joint", 3}}}};
+  unknown_parameter["parameters"][0]["name"] = "stiffness";
+  expect_error(unknown_parameter, "stiffness");
+  EXPECT_THROW(add_parameter_flag(*std::make_unique<demcal::optimise::ParameterSpace>(), "kn=1e8"), CampaignError);
+  EXPECT_THROW(parse_mapping_flag("force=horizontal_force:furlong"), CampaignError);
+}
+
+TEST(Campaign, MeasuredColumnsAreMappedToEngineNamesInSI) {
+  const std::string file = std::string(DEMCAL_SHARED_DIR) + "/data/stone-masonry-db/curves/FD_SW301_Lourenco2005.csv";
+  if (!fs::exists(file)) GTEST_SKIP() << "no shared data at " << file;
+  MeasuredSpec spec;
+  spec.file = file;
+  spec.columns = {{"force", "horizontal_force", "", 1}, {"top_horizontal", "top_displacement", "mm", 1}};
+  const auto raw = demcal::smoothing::read_curve(file);
+  const auto curve = load_measured(spec);
+  ASSERT_EQ(curve.column_names(), (std::vector<std::string>{"force", "top_horizontal"}));
+  const size_t row = raw.rows() / 2;
+  EXPECT_DOUBLE_EQ(curve.column("force").values[row], raw.column("horizontal_force").values[row] * 1e3);  // kN from the file
+  EXPECT_DOUBLE_EQ(curve.column("top_horizontal").values[row], raw.column("top_displacement").values[row] * 1e-3);
+  spec.columns[0].column = "shear";
+  try {
+    load_measured(spec);
+    FAIL();
+  } catch (const CampaignError& e) {
+    EXPECT_NE(std::string(e.what()).find("'shear'"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("horizontal_force"), std::string::npos);
+  }
+}
+
+// kill -9 at random moments, then --resume, several times: the same result.json as an uninterrupted
+// run, and no finished simulation done twice.
+TEST(Campaign, KilledAndResumedCampaignEndsWithTheUninterruptedResult) {
+  const auto dir = fresh_dir("resume");
+  auto campaign = toy_campaign(dir);
+  campaign["objective"] = {{"type", 2}, {"smoother", {{"epochs", 40}}}};
+  campaign["optimiser"] = {{"algorithm", "tbpso"}, {"population", 6}, {"iterations", 6}, {"seed", 11}};
+  campaign.erase("output");
+  {
+    std::ofstream(dir / "campaign.json") << campaign.dump(2);
+  }
+  const std::string log = (dir / "simulator.log").string();
+  ::setenv("TOY_SIMULATOR_LOG", log.c_str(), 1);
+  auto demcal = [&](const std::string& out, bool resume, double timeout) {
+    ProcessOptions o;
+    o.argv = {DEMCAL_BINARY, "calibrate", (dir / "campaign.json").string(), "--out", (dir / out).string(), "--quiet"};
+    if (resume) o.argv.push_back("--resume");
+    o.timeout_s = timeout;  // expiry = SIGKILL
+    o.stderr_path = (dir / (out + ".stderr")).string();
+    return run_process(o);
+  };
+  const auto reference = demcal("uninterrupted", false, 300);
+  ASSERT_TRUE(reference.ok()) << reference.message;
+  fs::remove(log);
+
+  std::mt19937 rng(2024);
+  std::uniform_real_distribution<double> moment(0.3, 1.2);
+  int kills = 0;
+  bool finished = false;
+  for (int attempt = 0; attempt < 12 && !finished; ++attempt) {
+    const bool last_chance = attempt >= 5;
+    const auto r = demcal("killed", attempt > 0, last_chance ? 300 : moment(rng));
+    if (r.status == ProcessStatus::timed_out) {
+      ++kills;
+    } else {
+      ASSERT_TRUE(r.ok()) << r.message;
+      finished = true;
+    }
+  }
+  ::unsetenv("TOY_SIMULATOR_LOG");
+  ASSERT_TRUE(finished);
+  EXPECT_GE(kills, 2);
+
+  auto comparable = [](json j) {
+    j.erase("wall_time_s");
+    j.erase("session");
+    j.erase("archive");
+    return j;
+  };
+  const json a = comparable(read_json(dir / "uninterrupted" / "result.json"));
+  const json b = comparable(read_json(dir / "killed" / "result.json"));
+  EXPECT_EQ(a.dump(), b.dump());
+
+  // Every finished simulator run (logged after its output was written) is distinct, except at most
+  // one per kill (a run finished but not yet archived when the kill came).
+  std::ifstream in(log);
+  std::multiset<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.insert(line);
+  std::set<std::string> distinct(lines.begin(), lines.end());
+  EXPECT_LE(lines.size() - distinct.size(), static_cast<size_t>(kills));
+  EXPECT_EQ(distinct.size(), RunArchive((dir / "killed" / "archive.sqlite").string()).run_count());
+}
+
+// `mpirun --oversubscribe -n 3 demcal calibrate ... --backend mpi` gives the threads backend's result.
+TEST(Campaign, MpiBackendGivesTheThreadsResult) {
+  if (std::system("command -v mpirun > /dev/null 2>&1") != 0) GTEST_SKIP() << "no mpirun";
+  const auto dir = fresh_dir("mpi");
+  const json campaign = {
+      {"name", "mpi-vs-threads"},
+      {"scene", {{"generator", "arch"},
+                 {"options", {{"contacts_per_joint", 3}, {"velocity", 0.05}, {"max_displacement", 0.004}}}}},
+      {"measured", {{"file", std::string(DEMCAL_SOURCE_DIR) + "/data/arch/measured.csv"},
+                    {"columns", {{"force", {{"column", "force"}, {"unit", "kN"}}},
+                                 {"load_vertical", {{"column", "load_vertical"}, {"unit", "mm"}}},
+                                 {"abutment_horizontal", {{"column", "abutment_horizontal"}, {"unit", "mm"}}}}}}},
+      {"parameters", {{{"name", "kn"}, {"lower", 1e9}, {"upper", 1e10}, {"scale", "log10"}},
+                      {{"name", "friction_deg"}, {"lower", 28}, {"upper", 34}}}},
+      {"fixed", {{"ks", 2e9}}},
+      {"objective", 1},
+      {"optimiser", {{"algorithm", "pso"}, {"population", 4}, {"iterations", 2}, {"seed", 9}}},
+      {"report", false}};
+  std::ofstream(dir / "campaign.json") << campaign.dump(2);
+  auto run = [&](std::vector<std::string> argv, const std::string& out, const std::string& backend) {
+    ProcessOptions o;
+    argv.insert(argv.end(), {DEMCAL_BINARY, "calibrate", (dir / "campaign.json").string(), "--out",
+                             (dir / out).string(), "--backend", backend, "--quiet"});
+    o.argv = argv;
+    o.timeout_s = 300;
+    o.stderr_path = (dir / (out + ".stderr")).string();
+    return run_process(o);
+  };
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
+  const auto threads = run({}, "threads", "threads");
+  ASSERT_TRUE(threads.ok()) << threads.message;
+  const auto mpi = run({"mpirun", "--oversubscribe", "-n", "3"}, "mpi", "mpi");
+  ASSERT_TRUE(mpi.ok()) << mpi.message;
+  auto comparable = [](json j) {
+    j.erase("wall_time_s");
+    j.erase("session");
+    j.erase("archive");
+    return j;
+  };
+  const json a = read_json(dir / "threads" / "result.json");
+  const json b = read_json(dir / "mpi" / "result.json");
+  EXPECT_EQ(a["session"]["backend"], "threads");
+  EXPECT_EQ(b["session"]["backend"], "mpi");
+  EXPECT_EQ(a["simulations"], 8);
+  EXPECT_EQ(comparable(a).dump(), comparable(b).dump());
+}

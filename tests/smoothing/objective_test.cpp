@@ -1,0 +1,105 @@
+// Objective 1 on hand-computed cases, the loading-envelope rule, channel matching and errors.
+#include "demcal/smoothing/objective.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+using namespace demcal::smoothing;
+
+namespace {
+
+Curve curve(const std::string& source, std::vector<Column> columns) {
+  Curve c;
+  c.source = source;
+  c.columns = std::move(columns);
+  return c;
+}
+
+ObjectiveOptions points(int n) {
+  ObjectiveOptions o;
+  o.points = n;
+  return o;
+}
+
+template <class F>
+void expect_curve_error(F f, const std::vector<std::string>& fragments) {
+  try {
+    f();
+    FAIL() << "no error";
+  } catch (const CurveError& e) {
+    for (const auto& s : fragments) EXPECT_NE(std::string(e.what()).find(s), std::string::npos) << e.what() << " lacks " << s;
+  }
+}
+
+}  // namespace
+
+TEST(Objective1, EqualLengthsThreePoints) {
+  const Curve e = curve("e.csv", {{"force", "N", {0, 1, 2}}, {"dv", "m", {0, 1, 2}}});
+  const Curve s = curve("s.csv", {{"force", "N", {0, 2, 2}}, {"dv", "m", {0, 1, 2}}});
+  const auto r = objective1(e, s, points(3));  // w = 0, 1, 2: differences 0, -1, 0
+  EXPECT_DOUBLE_EQ(r.fitness, 1.0);
+  EXPECT_DOUBLE_EQ(r.channels.at("dv"), 1.0);
+}
+
+TEST(Objective1, UnequalLengthsAndAWindowThatClipsBoth) {
+  // Experiment F = 2w on [0, 3] (4 rows), simulation F = w on [1, 4] (3 rows): window [1, 3].
+  const Curve e = curve("e.csv", {{"dv", "", {0, 1, 2, 3}}, {"force", "", {0, 2, 4, 6}}});
+  const Curve s = curve("s.csv", {{"dv", "", {1, 2.5, 4}}, {"force", "", {1, 2.5, 4}}});
+  // 5 points w = 1, 1.5, 2, 2.5, 3; difference = w: 1 + 2.25 + 4 + 6.25 + 9 = 22.5.
+  EXPECT_DOUBLE_EQ(objective1(e, s, points(5)).fitness, std::sqrt(22.5));
+  // 200 points w_k = 1 + 2k/199: sum (1 + 2k/199)^2 = 200 + 4*19900/199 + 4*(199*200*399/6)/199^2.
+  const double expected = std::sqrt(200.0 + 4.0 * 19900.0 / 199.0 + 4.0 * 2646700.0 / 39601.0);
+  EXPECT_NEAR(objective1(e, s).fitness, expected, 1e-12 * expected);
+  // Symmetric in the two curves.
+  EXPECT_NEAR(objective1(s, e).fitness, expected, 1e-12 * expected);
+}
+
+TEST(Objective1, TwoChannelsWeightedTimeIgnored) {
+  const Curve e = curve("e.csv", {{"time", "s", {0, 1, 2}}, {"force", "N", {0, 1, 2}},
+                                  {"dv", "m", {0, 1, 2}}, {"dh", "m", {0, 2, 4}}, {"extra", "", {5, 6, 7}}});
+  const Curve s = curve("s.csv", {{"time", "s", {9, 9, 9}}, {"dh", "m", {0, 2, 4}},
+                                  {"force", "N", {0, 2, 2}}, {"dv", "m", {0, 1, 2}}});
+  ObjectiveOptions o = points(3);
+  o.channel_weights["dh"] = 3;
+  const auto r = objective1(e, s, o);
+  ASSERT_EQ(r.channels.size(), 2u);  // "extra" is only in the experiment; "time" is ignored
+  EXPECT_DOUBLE_EQ(r.channels.at("dv"), 1.0);
+  EXPECT_DOUBLE_EQ(r.channels.at("dh"), 1.0);
+  EXPECT_DOUBLE_EQ(r.fitness, 1.0 + 3.0 * 1.0);
+  EXPECT_EQ(common_channels(e, s, o), (std::vector<std::string>{"dv", "dh"}));
+}
+
+TEST(Objective1, LoadingEnvelopeRule) {
+  // Back and forth, a repeated displacement and a NaN row (cycle separator).
+  const XYSeries path{{0, 1, 0.5, 1, 2, NAN, 1.5, 3}, {0, 1, 9, 5, 2, 7, 9, 3}};
+  const XYSeries env = loading_envelope(path);
+  EXPECT_EQ(env.x, (std::vector<double>{0, 1, 2, 3}));
+  EXPECT_EQ(env.y, (std::vector<double>{0, 5, 2, 3}));  // the latest force at w = 1 counts
+  EXPECT_DOUBLE_EQ(interpolate(env, 0.5), 2.5);
+  EXPECT_DOUBLE_EQ(interpolate(env, 2.5), 2.5);
+  EXPECT_DOUBLE_EQ(interpolate(env, -1), 0);
+  EXPECT_DOUBLE_EQ(interpolate(env, 7), 3);
+  // The fitness sees only the envelope: unloading loops change nothing.
+  const XYSeries monotone{{0, 1, 2, 3}, {0, 5, 2, 3}};
+  const XYSeries other{{0, 3}, {0, 0}};
+  EXPECT_DOUBLE_EQ(channel_misfit(path, other, 4), channel_misfit(monotone, other, 4));
+  EXPECT_DOUBLE_EQ(channel_misfit(monotone, other, 4), std::sqrt(0 + 25 + 4 + 9));
+}
+
+TEST(Objective1, Errors) {
+  const Curve e = curve("e.csv", {{"force", "", {0, 1}}, {"dv", "", {0, 1}}});
+  const Curve no_force = curve("s.csv", {{"F", "", {0, 1}}, {"dv", "", {0, 1}}});
+  const Curve other_channel = curve("s.csv", {{"force", "", {0, 1}}, {"dh", "", {0, 1}}});
+  const Curve apart = curve("s.csv", {{"force", "", {0, 1}}, {"dv", "", {2, 3}}});
+  expect_curve_error([&] { objective1(e, no_force); }, {"s.csv", "no force column 'force'", "F, dv"});
+  expect_curve_error([&] { objective1(e, other_channel); }, {"no displacement column in common", "e.csv", "(dv)", "s.csv", "(dh)"});
+  expect_curve_error([&] { objective1(e, apart); }, {"channel 'dv'", "do not overlap", "[0, 1]", "[2, 3]"});
+  ObjectiveOptions o;
+  o.channel_weights["dh"] = 2;
+  expect_curve_error([&] { objective1(e, e, o); }, {"'dh'", "not a common channel"});
+  o = {};
+  o.channel_weights["dv"] = -1;
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
+  EXPECT_THROW(points(1).Validate(), std::invalid_argument);
+}
