@@ -33,6 +33,9 @@ struct Body {
   std::string name, label;
   std::vector<Vec2> local;  // vertices relative to the centroid at angle 0
   std::vector<Vec2> world;
+  std::vector<Vec2> local_normals;  // outward unit normal of edge i (vertex i to i+1) at angle 0
+  std::vector<Vec2> world_normals;
+  std::vector<double> edge_lengths;
   Vec2 start_position = Vec2::Zero();
   Vec2 position = Vec2::Zero();
   double angle = 0;
@@ -61,6 +64,7 @@ struct Body {
     box_max = -box_min;
     for (std::size_t i = 0; i < local.size(); ++i) {
       world[i] = position + m * local[i];
+      world_normals[i] = m * local_normals[i];
       box_min = box_min.cwiseMin(world[i]);
       box_max = box_max.cwiseMax(world[i]);
     }
@@ -167,6 +171,12 @@ void Engine::build_bodies() {
       body.radius = std::max(body.radius, (v - c).norm());
     }
     body.world = b.vertices;
+    for (std::size_t i = 0; i < body.local.size(); ++i) {
+      const Vec2 edge = body.local[(i + 1) % body.local.size()] - body.local[i];
+      body.edge_lengths.push_back(edge.norm());
+      body.local_normals.push_back(Vec2(edge.y(), -edge.x()) / edge.norm());
+    }
+    body.world_normals = body.local_normals;
     body.position = body.start_position = c;
     body.mass = b.density * scene_.width * geometry::signed_area(b.vertices);
     body.inertia = b.density * scene_.width * geometry::polar_moment(b.vertices);
@@ -261,19 +271,22 @@ int Engine::group_for(const Body& a, const Body& b, const Vec2& normal) const {
   return 0;
 }
 
-// Largest separation of polygon q from the edges of polygon p, and the edge that gives it.
-static std::pair<double, int> max_separation(const std::vector<Vec2>& p, const std::vector<Vec2>& q) {
+// Largest separation of body q from the edges of body p, and the edge that gives it; stops early
+// once a separation beyond `margin` proves the pair apart.
+static std::pair<double, int> max_separation(const Body& p, const Body& q, double margin) {
   double best = -std::numeric_limits<double>::infinity();
   int best_edge = 0;
-  const int n = static_cast<int>(p.size());
+  const int n = static_cast<int>(p.world.size());
   for (int e = 0; e < n; ++e) {
-    const Vec2 d = p[(e + 1) % n] - p[e];
-    const Vec2 normal = Vec2(d.y(), -d.x()) / d.norm();
+    const Vec2& normal = p.world_normals[e];
+    const double offset = p.world[e].dot(normal);
     double s = std::numeric_limits<double>::infinity();
-    for (const Vec2& v : q) s = std::min(s, (v - p[e]).dot(normal));
+    for (const Vec2& v : q.world) s = std::min(s, v.dot(normal));
+    s -= offset;
     if (s > best) {
       best = s;
       best_edge = e;
+      if (s > margin) break;
     }
   }
   return {best, best_edge};
@@ -283,9 +296,9 @@ void Engine::process_pair(int ia, int ib) {
   Body& a = bodies_[ia];
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
-  const auto [sep_a, edge_a] = max_separation(a.world, b.world);
+  const auto [sep_a, edge_a] = max_separation(a, b, margin_);
   if (sep_a > margin_) return;
-  const auto [sep_b, edge_b] = max_separation(b.world, a.world);
+  const auto [sep_b, edge_b] = max_separation(b, a, margin_);
   if (sep_b > margin_) return;
 
   auto it = contacts_.find(key);
@@ -299,17 +312,16 @@ void Engine::process_pair(int ia, int ib) {
   const Body& ref = ref_on_a ? a : b;
   const Body& inc = ref_on_a ? b : a;
   const int ref_edge = ref_on_a ? edge_a : edge_b;
-  const int nr = static_cast<int>(ref.world.size()), ni = static_cast<int>(inc.world.size());
-  const Vec2 r1 = ref.world[ref_edge], r2 = ref.world[(ref_edge + 1) % nr];
-  const double ref_length = (r2 - r1).norm();
-  const Vec2 tr = (r2 - r1) / ref_length;
-  const Vec2 normal(tr.y(), -tr.x());  // outward from the reference polygon
+  const int ni = static_cast<int>(inc.world.size());
+  const Vec2 r1 = ref.world[ref_edge];
+  const double ref_length = ref.edge_lengths[ref_edge];
+  const Vec2 normal = ref.world_normals[ref_edge];  // outward from the reference polygon
+  const Vec2 tr(-normal.y(), normal.x());
 
   int inc_edge = 0;
   double most_opposed = std::numeric_limits<double>::infinity();
   for (int e = 0; e < ni; ++e) {
-    const Vec2 d = inc.world[(e + 1) % ni] - inc.world[e];
-    const double c = Vec2(d.y(), -d.x()).dot(normal) / d.norm();
+    const double c = inc.world_normals[e].dot(normal);
     if (c < most_opposed) {
       most_opposed = c;
       inc_edge = e;
@@ -376,6 +388,9 @@ void Engine::process_pair(int ia, int ib) {
   const MohrCoulombLaw& law = groups_[contact.group].law;
   double slip_weighted = 0, length_total = 0;
   bool touching = false;
+  // The pair's resultant: force on b and its moment about the origin, applied once at the end.
+  Vec2 resultant = Vec2::Zero();
+  double moment = 0;
   for (int k = 0; k < count; ++k) {
     // Nodes are stored in the order of increasing coordinate along tangent_ab.
     const int slot = ref_on_a ? k : count - 1 - k;
@@ -391,12 +406,16 @@ void Engine::process_pair(int ia, int ib) {
     if (f.normal == 0) continue;
     touching = true;
     const Vec2 force_on_b = f.normal * normal_ab + f.shear * tangent_ab;
-    b.force += force_on_b;
-    b.torque += cross(point - b.position, force_on_b);
-    a.force -= force_on_b;
-    a.torque -= cross(point - a.position, force_on_b);
+    resultant += force_on_b;
+    moment += cross(point, force_on_b);
     slip_weighted += f.plastic_slip * lengths[k];
     length_total += lengths[k];
+  }
+  if (touching) {
+    b.force += resultant;
+    b.torque += moment - cross(b.position, resultant);
+    a.force -= resultant;
+    a.torque -= moment - cross(a.position, resultant);
   }
   if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
   if (touching && loading_stage_) contact.ever_touched = true;
