@@ -4,6 +4,8 @@
 // in 3 and 10 dimensions, at 200 and 500 evaluations, over 25 seeds. Prints Markdown tables.
 //
 //   bench_optimise_pagmo [--seeds N] [--quick]     (--quick: 5 seeds, 3-D only)
+//   bench_optimise_pagmo [--seeds N] --sphere-2000  (Sphere 3-D, 2000 evaluations, with and without
+//                                                    a 200-evaluation LN_BOBYQA polish)
 #include <demcal/optimise/optimise.hpp>
 
 #include <pagmo/algorithms/pso.hpp>
@@ -63,7 +65,8 @@ double run_pagmo(const std::string& which, const TestFunction& f, long budget, u
   return *best;
 }
 
-double run_demcal(const std::string& algorithm, const TestFunction& f, long budget, unsigned seed, long& evaluations) {
+double run_demcal(const std::string& algorithm, const TestFunction& f, long budget, unsigned seed, long& evaluations,
+                  long polish_evaluations = 0) {
   ParameterSpace space;
   for (int k = 0; k < f.dimension; ++k) space.add(std::string("x").append(std::to_string(k)), f.lower[k], f.upper[k]);
   OptimiserOptions options;
@@ -80,6 +83,7 @@ double run_demcal(const std::string& algorithm, const TestFunction& f, long budg
     options.ga_mutation = GaMutation::gaussian;
     options.elitism = 1;
   }
+  options.polish_evaluations = polish_evaluations;
   auto optimiser = make_optimiser(space, options);
   const auto summary = minimise(*optimiser, f.evaluate);
   evaluations = summary.evaluations;
@@ -107,6 +111,37 @@ std::string cell(const Quartiles& q) {
   return text;
 }
 
+// Sphere 3-D at 2000 evaluations, with and without the polish (the last polish_evaluations of the
+// budget to LN_BOBYQA from the best point): how many seeds reach < 1e-6, median and worst.
+void sphere_2000(int seeds, long polish_evaluations) {
+  const TestFunction f = make_test_function("sphere", 3);
+  const std::vector<std::string> algorithms = {"pso", "tbpso:paper", "tbpso:toward", "ga", "ga:gaussian-elitist",
+                                               "nlopt:GN_DIRECT_L", "nlopt:GN_CRS2_LM", "nlopt:GN_ISRES",
+                                               "nlopt:GN_ESCH"};
+  std::printf("### Sphere 3-D, 2000 evaluations, %d seeds (1..%d)\n\n", seeds, seeds);
+  std::printf("| algorithm | no polish: seeds < 1e-6 | median | worst | polish %ld of 2000: seeds < 1e-6 | median | "
+              "worst | most evaluations |\n|---|---|---|---|---|---|---|---|\n",
+              polish_evaluations);
+  for (const auto& algorithm : algorithms) {
+    std::printf("| %s |", algorithm.c_str());
+    long most = 0;
+    for (long polish : {0L, polish_evaluations}) {
+      std::vector<double> best;
+      int reached = 0;
+      for (int seed = 1; seed <= seeds; ++seed) {
+        long evaluations = 0;
+        best.push_back(run_demcal(algorithm, f, 2000, static_cast<unsigned>(seed), evaluations, polish));
+        reached += best.back() < 1e-6;
+        most = std::max(most, evaluations);
+      }
+      const Quartiles q = quartiles(best);
+      std::printf(" %d / %d | %.3g | %.3g |", reached, seeds, q.median, *std::max_element(best.begin(), best.end()));
+    }
+    std::printf(" %ld |\n", most);
+    std::fflush(stdout);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -115,6 +150,10 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--seeds") && i + 1 < argc) seeds = std::atoi(argv[++i]);
     if (!std::strcmp(argv[i], "--quick")) seeds = 5, dimensions = {3};
+    if (!std::strcmp(argv[i], "--sphere-2000")) {
+      sphere_2000(seeds, 200);
+      return 0;
+    }
   }
   const std::vector<std::string> algorithms = {
       "pso", "tbpso:toward", "tbpso:paper", "ga", "ga:gaussian-elitist",

@@ -42,6 +42,8 @@ const nlohmann::json& state_field(const nlohmann::json& state, const std::string
 
 std::unique_ptr<Optimiser> make_swarm(const ParameterSpace& space, const OptimiserOptions& options, bool trust_based);
 std::unique_ptr<Optimiser> make_genetic(const ParameterSpace& space, const OptimiserOptions& options);
+// options.polish_evaluations > 0: the main algorithm, then a local NLopt polish (polished.cpp).
+std::unique_ptr<Optimiser> make_polished(const ParameterSpace& space, const OptimiserOptions& options);
 std::unique_ptr<Optimiser> make_nlopt(const ParameterSpace& space, const OptimiserOptions& options,
                                       const std::string& algorithm_name);
 

@@ -113,6 +113,18 @@ void OptimiserOptions::Validate() const {
   for (std::size_t k = 0; k < initial_point.size(); ++k)
     if (!std::isfinite(initial_point[k]))
       fail("option initial_point[" + std::to_string(k) + "] = " + fmt(initial_point[k]) + " is not finite");
+  if (polish_evaluations < 0)
+    fail("option polish_evaluations = " + std::to_string(polish_evaluations) + " must be >= 0");
+  if (polish_evaluations > 0) {
+    if (polish_evaluations >= evaluation_budget())
+      fail("option polish_evaluations = " + std::to_string(polish_evaluations) +
+           " must be smaller than the evaluation budget " + std::to_string(evaluation_budget()) +
+           " (the polish takes its evaluations out of the budget)");
+    if (detail::nlopt_name_from_algorithm("nlopt:" + polish_algorithm).empty())
+      fail("option polish_algorithm = '" + polish_algorithm + "' is not a known NLopt algorithm");
+    if (!(polish_initial_step > 0.0) || !std::isfinite(polish_initial_step))
+      fail("option polish_initial_step = " + fmt(polish_initial_step) + " must be finite and > 0");
+  }
 }
 
 // ---- base class -----------------------------------------------------------------------------
@@ -195,6 +207,7 @@ std::unique_ptr<Optimiser> make_optimiser(const ParameterSpace& space, const Opt
   if (!options.initial_point.empty() && static_cast<int>(options.initial_point.size()) != space.dimension())
     fail("option initial_point has " + std::to_string(options.initial_point.size()) + " values, the space has " +
          std::to_string(space.dimension()) + " free parameters");
+  if (options.polish_evaluations > 0) return detail::make_polished(space, options);
   if (options.algorithm == "pso") return detail::make_swarm(space, options, false);
   if (options.algorithm == "tbpso") return detail::make_swarm(space, options, true);
   if (options.algorithm == "ga") return detail::make_genetic(space, options);

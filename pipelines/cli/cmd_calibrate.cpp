@@ -15,7 +15,8 @@ struct CalibrateFlags {
   std::string campaign_file;
   std::string scene, generator, experiment, out, archive, name, algorithm, backend, command;
   std::vector<std::string> params, mappings, generator_options;
-  int iterations = 0, swarm = 0, objective = 0, threads = -1;
+  int iterations = 0, swarm = 0, objective = 0, threads = -1, fitness_threads = -1;
+  long polish = -1;
   long max_simulations = 0;
   long long seed = -1;
   double timeout = -1;
@@ -69,6 +70,12 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
   }
   if (f.timeout >= 0) c.backend.timeout_s = f.timeout;
   if (f.threads >= 0) c.backend.threads = c.backend.parallel = f.threads;
+  if (f.fitness_threads >= 0) c.backend.fitness_threads = f.fitness_threads;
+  if (f.polish == 0) c.polish.enabled = false;
+  if (f.polish > 0) {
+    c.polish.enabled = true;
+    c.polish.options.max_evaluations = f.polish;
+  }
   if (!f.out.empty()) c.output = f.out;
   if (!f.archive.empty()) c.archive = f.archive;
   if (f.no_report) c.report = false;
@@ -132,6 +139,8 @@ void setup(CLI::App& app) {
   sub->add_option("--command", flags->command, "External simulator template (implies --backend command)");
   sub->add_option("--timeout", flags->timeout, "External command timeout per run (s)");
   sub->add_option("--threads", flags->threads, "Simulations at once (0 = every core)");
+  sub->add_option("--fitness-threads", flags->fitness_threads, "Threads computing objectives (0 = every core)");
+  sub->add_option("--polish", flags->polish, "Local NLopt polish after the swarm: N simulations (0 = off)");
   sub->add_option("--out", flags->out, "Output folder");
   sub->add_option("--archive", flags->archive, "Archive file (default OUT/archive.sqlite)");
   sub->add_option("--name", flags->name, "Campaign name");

@@ -53,8 +53,10 @@ void run(const OptimiseCommandOptions& o) {
   options.bounds = parse_bound_handling(o.bounds);
   options.ga_mutation = parse_ga_mutation(o.ga_mutation);
   options.elitism = o.elitism;
+  options.polish_evaluations = o.polish_evaluations;
+  options.polish_algorithm = o.polish_algorithm;
   auto optimiser = make_optimiser(space, options);
-  MinimiseSummary summary = minimise(*optimiser, function.evaluate);
+  const MinimiseSummary summary = minimise(*optimiser, function.evaluate);
 
   nlohmann::json out;
   out["function"] = o.function;
@@ -67,19 +69,11 @@ void run(const OptimiseCommandOptions& o) {
   if (!summary.message.empty()) out["message"] = summary.message;
   out["iterations"] = summary.iterations;
 
-  if (o.polish_evaluations > 0 && summary.best_x.size() > 0) {
-    PolishOptions polish;
-    polish.algorithm = o.polish_algorithm;
-    polish.max_evaluations = o.polish_evaluations;
-    polish.seed = o.seed;
-    auto polisher = make_polisher(space, summary.best_x, polish);
-    const MinimiseSummary polished = minimise(*polisher, function.evaluate);
-    out["before_polish"] = {{"best_value", summary.best_value}, {"best_x", vector_json(summary.best_x)}};
-    summary.evaluations += polished.evaluations;
-    if (polished.best_value < summary.best_value) {
-      summary.best_value = polished.best_value;
-      summary.best_x = polished.best_x;
-    }
+  if (const auto polish = optimiser->polish_report()) {
+    out["before_polish"] = {{"best_value", polish->main_best_value},
+                            {"best_x", vector_json(polish->main_best_x)},
+                            {"evaluations", polish->main_evaluations}};
+    out["polish"] = {{"evaluations", polish->polish_evaluations}, {"status", polish->polish_status}};
   }
   out["best_value"] = summary.best_value;
   out["best_x"] = vector_json(summary.best_x);
@@ -106,7 +100,8 @@ void setup(CLI::App& app) {
   sub->add_option("--ga-mutation", options->ga_mutation, "GA mutation: reset (paper) | gaussian")->capture_default_str();
   sub->add_option("--elitism", options->elitism, "GA: individuals kept unchanged per generation")->capture_default_str();
   sub->add_flag("--unshifted", options->unshifted, "Put the optimum at the textbook location (box centre for most)");
-  sub->add_option("--polish", options->polish_evaluations, "Extra evaluations of a local NLopt run from the best point")
+  sub->add_option("--polish", options->polish_evaluations,
+                  "Evaluations (out of --evals) for a local NLopt run from the main algorithm's best point")
       ->capture_default_str();
   sub->add_option("--polish-algorithm", options->polish_algorithm, "NLopt algorithm of the polish step")->capture_default_str();
   sub->callback([options] { run(*options); });

@@ -4,6 +4,7 @@
 
 #include "demcal/smoothing/smoothing.hpp"
 
+#include <filesystem>
 #include <iostream>
 #include <stdexcept>
 
@@ -16,6 +17,7 @@ struct SmoothArgs {
   std::uint64_t seed = 1;
   int epochs = demcal::smoothing::SmootherOptions{}.epochs;
   int window = 0;  // 0 = the method's default
+  std::string backend = "native";
 };
 
 void run_smooth(const SmoothArgs& a) {
@@ -34,6 +36,7 @@ void run_smooth(const SmoothArgs& a) {
     options.points = a.points;
     options.seed = a.seed;
     options.epochs = a.epochs;
+    options.backend = parse_smoother_backend(a.backend);
     smoothed = smooth_dnn(input, options);
   } else if (a.method == "moving-average") {
     smoothed = moving_average(input, a.window ? a.window : kDefaultMovingAverageWindow, a.points);
@@ -52,7 +55,7 @@ void run_smooth(const SmoothArgs& a) {
 
   if (!a.plot.empty()) {
     PlotOptions plot;
-    plot.title = a.input + " (" + a.method + ")";
+    plot.title = std::filesystem::path(a.input).filename().string() + " (" + a.method + ")";
     plot.x_label = xc.name + (xc.unit.empty() ? "" : " [" + xc.unit + "]");
     plot.y_label = yc.name + (yc.unit.empty() ? "" : " [" + yc.unit + "]");
     plot_png({{input, "raw", true}, {smoothed, a.method, false}}, a.plot, plot);
@@ -72,6 +75,8 @@ void setup(CLI::App& app) {
   sub->add_option("--seed", args->seed, "Seed of the network's initial weights");
   sub->add_option("--epochs", args->epochs, "Adam epochs of the network (the stopping rule)")->check(CLI::Range(1, 1000000));
   sub->add_option("--window", args->window, "Window (points, odd) of the baselines; 0 = default");
+  sub->add_option("--backend", args->backend, "Network training: native (default) or libtorch")
+      ->check(CLI::IsMember({"native", "libtorch"}));
   sub->add_option("--plot", args->plot, "Also write a PNG of the raw and smoothed curves (gnuplot)");
   sub->callback([args] { run_smooth(*args); });
 }

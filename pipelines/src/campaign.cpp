@@ -13,7 +13,11 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <condition_variable>
+#include <deque>
+#include <mutex>
 #include <set>
+#include <thread>
 
 namespace demcal::pipelines {
 
@@ -121,29 +125,112 @@ std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, co
   return std::make_unique<ThreadBackend>(prepared.scenes, config.backend.threads);
 }
 
-// Fitness of one run against one case, from the archive or computed (objective 1 here; objective 2
-// in batches by the caller).
-FitnessRecord objective1_record(const RunRecord& run, const smoothing::Curve& measured, const CampaignConfig& config,
-                                const std::string& key) {
+// Fitness of one run against one case: objective 1, and objective 2 when the campaign asks for it.
+// Thread-safe (reads `prepared` only), so it runs on the fitness workers.
+FitnessRecord compute_fitness(std::int64_t run_id, const std::string& status, const smoothing::Curve& curves,
+                              size_t case_index, const Prepared& prepared, const CampaignConfig& config) {
   FitnessRecord f;
-  f.run_id = run.id;
-  f.objective_key = key;
+  f.run_id = run_id;
+  f.objective_key = prepared.objective_keys[case_index];
   f.objective = config.objective;
-  if (!usable_status(run.status) || run.curves.rows() < 2) return f;
+  if (!usable_status(status) || curves.rows() < 2) return f;
   const auto start = std::chrono::steady_clock::now();
   try {
-    const auto r = smoothing::objective1(measured, run.curves, config.objective_options);
+    const auto r = smoothing::objective1(prepared.measured[case_index], curves, config.objective_options);
     f.objective1 = r.fitness;
     if (config.objective == 1) {
       f.fitness = r.fitness;
       f.channels = r.channels;
+    } else {
+      const auto r2 = prepared.objective2[case_index]->evaluate(curves);
+      f.objective2 = r2.fitness;
+      f.fitness = r2.fitness;
+      f.channels = r2.channels;
     }
   } catch (const std::exception& e) {
+    f.fitness = NAN;
+    f.objective2 = NAN;
     f.channels = {{"error", e.what()}};
   }
   f.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return f;
 }
+
+// Fitness jobs of one iteration on worker threads. Jobs are submitted as runs become available (from
+// the archive at once, simulated ones as each finishes), so the objective-2 smoothing of finished
+// runs overlaps the simulations still running. Each curve is smoothed by its own network, so a value
+// does not depend on which jobs share a worker: the result is that of a sequential evaluation.
+class FitnessWorkers {
+ public:
+  FitnessWorkers(int threads, const Prepared& prepared, const CampaignConfig& config)
+      : prepared_(prepared), config_(config) {
+    for (int i = 0; i < std::max(1, threads); ++i) workers_.emplace_back([this] { work(); });
+  }
+  ~FitnessWorkers() { stop(); }
+  // Queues the fitness of run `run_id` (its status and curves) against case `case_index`; returns
+  // the job's index in finish()'s result.
+  size_t submit(std::int64_t run_id, std::string status, smoothing::Curve curves, size_t case_index) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const size_t index = jobs_.size();
+    jobs_.push_back({run_id, std::move(status), std::move(curves), case_index});
+    results_.emplace_back();
+    queue_.push_back(index);
+    wake_.notify_one();
+    return index;
+  }
+  // Waits for every submitted job; results in submission order.
+  std::vector<FitnessRecord> finish() {
+    stop();
+    return std::move(results_);
+  }
+
+ private:
+  struct Job {
+    std::int64_t run_id;
+    std::string status;
+    smoothing::Curve curves;
+    size_t case_index;
+  };
+  void work() {
+    for (;;) {
+      size_t index = 0;
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        wake_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+        if (queue_.empty()) return;
+        index = queue_.front();
+        queue_.pop_front();
+      }
+      const Job* job_ptr = nullptr;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        job_ptr = &jobs_[index];  // a deque: growing it keeps references valid
+      }
+      const Job& job = *job_ptr;
+      FitnessRecord record = compute_fitness(job.run_id, job.status, job.curves, job.case_index, prepared_, config_);
+      std::lock_guard<std::mutex> lock(mutex_);
+      results_[index] = std::move(record);
+    }
+  }
+  void stop() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stopping_ = true;
+    }
+    wake_.notify_all();
+    for (auto& t : workers_)
+      if (t.joinable()) t.join();
+  }
+  const Prepared& prepared_;
+  const CampaignConfig& config_;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  std::deque<size_t> queue_;
+  std::deque<Job> jobs_;
+  std::vector<FitnessRecord> results_;
+  bool stopping_ = false;
+  std::vector<std::thread> workers_;
+};
 
 std::vector<ParameterSet> top_distinct(const std::vector<ParameterSet>& all, size_t count) {
   std::vector<const ParameterSet*> sorted;
@@ -161,7 +248,40 @@ std::vector<ParameterSet> top_distinct(const std::vector<ParameterSet>& all, siz
   return top;
 }
 
+Identifiability identifiability(const std::vector<ParameterSet>& all, const CampaignConfig& config) {
+  Identifiability id;
+  id.relative_band = config.identifiability_band > 0
+                         ? config.identifiability_band
+                         : 1.0 / std::sqrt(2.0 * static_cast<double>(config.objective_options.points));
+  const auto top = top_distinct(all, all.size());
+  if (top.empty()) return id;
+  id.band_fitness = top.front().fitness * (1 + id.relative_band);
+  for (const auto& name : config.space.free_names()) {
+    const double best = top.front().params.at(name);
+    id.parameters[name] = {best, best, best};
+  }
+  for (const auto& s : top) {
+    if (s.fitness > id.band_fitness) break;
+    ++id.sets_in_band;
+    for (auto& [name, range] : id.parameters) {
+      range.min = std::min(range.min, s.params.at(name));
+      range.max = std::max(range.max, s.params.at(name));
+    }
+  }
+  return id;
+}
+
 }  // namespace
+
+json Identifiability::to_json() const {
+  json params = json::object();
+  for (const auto& [name, r] : parameters) {
+    params[name] = {{"best", r.best}, {"min", r.min}, {"max", r.max}};
+    if (r.min > 0) params[name]["max_over_min"] = r.max / r.min;
+  }
+  return {{"relative_band", relative_band}, {"band_fitness", finite_or_null(band_fitness)},
+          {"sets_in_band", sets_in_band}, {"parameters", params}};
+}
 
 json CampaignResult::to_json() const {
   auto set_json = [](const ParameterSet& s) {
@@ -172,7 +292,7 @@ json CampaignResult::to_json() const {
   for (const auto& s : top) top_json.push_back(set_json(s));
   json convergence = json::array();
   for (double v : best_history) convergence.push_back(finite_or_null(v));
-  return {{"status", status == CampaignStatus::completed ? "completed" : "failed"},
+  json j = {{"status", status == CampaignStatus::completed ? "completed" : "failed"},
           {"message", message},
           {"best", set_json(best)},
           {"top", top_json},
@@ -183,7 +303,12 @@ json CampaignResult::to_json() const {
           {"optimiser_status", optimiser_status},
           {"convergence", convergence},
           {"wall_time_s", wall_time_s},
+          {"identifiability", identifiability.to_json()},
           {"session", {{"simulated", simulated_this_session}, {"reused_from_archive", reused_from_archive}}}};
+  if (polished)
+    j["polish"] = {{"evaluations", polish_evaluations}, {"swarm_best_fitness", finite_or_null(swarm_best_fitness)},
+                   {"status", polish_status}};
+  return j;
 }
 
 CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& options) {
@@ -204,6 +329,21 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
   auto backend = make_backend(config, prepared, options);
   RunArchive archive(config.archive.empty() ? (fs::path(config.output) / "archive.sqlite").string() : config.archive);
 
+  // The saved optimiser state: the swarm's alone, or with a polish {"swarm": ..., "polish": ...|null}.
+  std::unique_ptr<optimise::Optimiser> polisher;
+  auto save_optimisers = [&]() -> json {
+    if (!config.polish.enabled) return optimiser->save_state();
+    return {{"swarm", optimiser->save_state()}, {"polish", polisher ? polisher->save_state() : json(nullptr)}};
+  };
+  auto load_optimisers = [&](const json& state) {
+    if (!config.polish.enabled) return optimiser->load_state(state);
+    optimiser->load_state(state.at("swarm"));
+    if (!state.at("polish").is_null()) {
+      polisher = optimise::make_polisher(config.space, optimiser->best_x(), config.polish.options);
+      polisher->load_state(state.at("polish"));
+    }
+  };
+
   const json defining = config.result_defining_json();
   const std::string config_key = hash_text(defining.dump());
   std::int64_t campaign_id = 0;
@@ -213,7 +353,7 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
       campaign_id = previous->id;
       if (auto last = archive.last_iteration(campaign_id)) {
         try {
-          optimiser->load_state(json::parse(last->optimiser_state));
+          load_optimisers(json::parse(last->optimiser_state));
         } catch (const std::exception& e) {
           throw CampaignError(archive.path() + ": cannot restore the optimiser state of iteration " +
                               std::to_string(last->iteration) + ": " + e.what());
@@ -237,22 +377,46 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
   CampaignResult result;
   ProgressPrinter printer(options.progress);
   ProgressState progress;
-  progress.iterations = planned_iterations;
-  progress.total = budget * static_cast<long>(cases);
+  const long polish_budget = config.polish.enabled ? config.polish.options.max_evaluations : 0;
+  progress.iterations = planned_iterations + static_cast<int>(polish_budget);
+  progress.total = (budget + polish_budget) * static_cast<long>(cases);
   progress.done = static_cast<long>(archive.evaluations(campaign_id).size() * cases);
   progress.best = optimiser->best_value();
 
-  for (int iteration = next_iteration; !optimiser->done(); ++iteration) {
-    const std::vector<Eigen::VectorXd> batch = optimiser->ask();
+  // The optimiser that asks next: the swarm, then (campaign option) the local polish from its best.
+  auto active = [&]() -> optimise::Optimiser* {
+    if (!optimiser->done()) return optimiser.get();
+    if (!config.polish.enabled || optimiser->best_x().size() == 0) return nullptr;
+    if (!polisher) polisher = optimise::make_polisher(config.space, optimiser->best_x(), config.polish.options);
+    return polisher->done() ? nullptr : polisher.get();
+  };
+  const int fitness_threads = config.backend.fitness_threads > 0 ? config.backend.fitness_threads : hardware_threads();
+
+  for (int iteration = next_iteration;; ++iteration) {
+    optimise::Optimiser* asking = active();
+    if (!asking) break;
+    const std::vector<Eigen::VectorXd> batch = asking->ask();
     if (batch.empty()) break;
     progress.iteration = iteration + 1;
     std::vector<std::map<std::string, double>> candidates;
     for (const auto& x : batch) candidates.push_back(config.space.values(x));
 
     // Runs: from the archive where they exist, else simulated (each committed as it finishes).
+    // Fitness jobs start as soon as a run is available, on their own workers.
+    FitnessWorkers workers(fitness_threads, prepared, config);
+    std::map<std::pair<std::int64_t, size_t>, size_t> job_of;  // (run id, case) -> fitness job
+    std::vector<std::vector<double>> case_fitness(candidates.size(), std::vector<double>(cases, NAN));
+    auto need_fitness = [&](const RunRecord& run, size_t k) {
+      if (job_of.count({run.id, k})) return;
+      if (auto f = archive.find_fitness(run.id, prepared.objective_keys[k])) {
+        job_of[{run.id, k}] = SIZE_MAX;
+        return;
+      }
+      job_of[{run.id, k}] = workers.submit(run.id, run.status, run.curves, k);
+    };
+
     std::vector<std::vector<std::int64_t>> run_ids(candidates.size(), std::vector<std::int64_t>(cases, 0));
     std::vector<SimulationTask> tasks;
-    std::vector<std::pair<size_t, size_t>> task_slots;
     std::map<std::pair<std::string, std::string>, size_t> queued;  // duplicates inside one batch run once
     std::vector<std::vector<std::pair<size_t, size_t>>> task_users;
     for (size_t c = 0; c < candidates.size(); ++c)
@@ -262,6 +426,7 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
           run_ids[c][k] = run->id;
           ++result.reused_from_archive;
           ++progress.done;
+          need_fitness(*run, k);
           continue;
         }
         const auto key = std::make_pair(model, parameter_key(candidates[c]));
@@ -284,9 +449,10 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
       run.wall_time_s = outcome.wall_time_s;
       run.curves = std::move(outcome.curves);
       run.details = std::move(outcome.details);
-      const std::int64_t id = archive.insert_run(run);
+      run.id = archive.insert_run(run);
+      need_fitness(run, tasks[index].case_index);
       for (const auto& [c, k] : task_users[index]) {
-        run_ids[c][k] = id;
+        run_ids[c][k] = run.id;
         ++progress.done;
       }
       ++result.simulated_this_session;
@@ -295,68 +461,18 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
       printer.simulation_done(progress);
     });
 
-    // Fitness per (candidate, case): archived, or computed now and archived.
-    std::vector<std::vector<double>> case_fitness(candidates.size(), std::vector<double>(cases, NAN));
-    for (size_t k = 0; k < cases; ++k) {
-      std::vector<size_t> pending;  // candidates needing objective 2 for this case
-      std::vector<FitnessRecord> pending_records;
-      std::vector<smoothing::Curve> pending_curves;
-      std::map<std::int64_t, size_t> pending_by_run;
-      for (size_t c = 0; c < candidates.size(); ++c) {
-        const std::int64_t id = run_ids[c][k];
-        if (auto f = archive.find_fitness(id, prepared.objective_keys[k])) {
+    // Fitness per (candidate, case): archived, or computed by the workers and archived now.
+    const std::vector<FitnessRecord> computed = workers.finish();
+    for (const auto& record : computed) archive.put_fitness(record);
+    for (size_t c = 0; c < candidates.size(); ++c)
+      for (size_t k = 0; k < cases; ++k) {
+        const size_t job = job_of.at({run_ids[c][k], k});
+        if (job != SIZE_MAX) {
+          case_fitness[c][k] = computed[job].fitness;
+        } else if (auto f = archive.find_fitness(run_ids[c][k], prepared.objective_keys[k])) {
           case_fitness[c][k] = f->fitness;
-          continue;
-        }
-        if (pending_by_run.count(id)) continue;
-        const RunRecord run = *archive.run(id);
-        FitnessRecord record = objective1_record(run, prepared.measured[k], config, prepared.objective_keys[k]);
-        if (config.objective == 1 || !std::isfinite(record.objective1)) {
-          archive.put_fitness(record);
-          case_fitness[c][k] = record.fitness;
-          continue;
-        }
-        pending_by_run[id] = pending.size();
-        pending.push_back(c);
-        pending_records.push_back(record);
-        pending_curves.push_back(run.curves);
-      }
-      if (!pending.empty()) {
-        const auto start = std::chrono::steady_clock::now();
-        std::vector<smoothing::FitnessResult> results;
-        std::vector<bool> ok(pending.size(), true);
-        try {
-          results = prepared.objective2[k]->evaluate_batch(pending_curves);
-        } catch (const std::exception&) {
-          // One bad curve spoils the batch: evaluate one by one, marking the bad ones failed.
-          results.assign(pending.size(), {});
-          for (size_t i = 0; i < pending.size(); ++i) {
-            try {
-              results[i] = prepared.objective2[k]->evaluate(pending_curves[i]);
-            } catch (const std::exception& e) {
-              ok[i] = false;
-              pending_records[i].channels = {{"error", e.what()}};
-            }
-          }
-        }
-        const double per_curve = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() /
-                                 static_cast<double>(pending.size());
-        for (size_t i = 0; i < pending.size(); ++i) {
-          auto& record = pending_records[i];
-          if (ok[i]) {
-            record.objective2 = results[i].fitness;
-            record.fitness = results[i].fitness;
-            record.channels = results[i].channels;
-          }
-          record.wall_time_s += per_curve;
-          archive.put_fitness(record);
         }
       }
-      for (size_t c = 0; c < candidates.size(); ++c)
-        if (std::isnan(case_fitness[c][k])) {
-          if (auto f = archive.find_fitness(run_ids[c][k], prepared.objective_keys[k])) case_fitness[c][k] = f->fitness;
-        }
-    }
 
     std::vector<double> fitness(candidates.size(), 0.0);
     std::vector<EvaluationRecord> evaluations;
@@ -371,16 +487,16 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
       e.fitness = fitness[c];
       evaluations.push_back(std::move(e));
     }
-    optimiser->tell(fitness);
+    asking->tell(fitness);
     IterationRecord record;
     record.campaign_id = campaign_id;
     record.iteration = iteration;
-    record.optimiser_state = optimiser->save_state().dump();
-    record.best_fitness = optimiser->best_value();
-    record.evaluations = static_cast<int>(optimiser->evaluations());
+    record.optimiser_state = save_optimisers().dump();
+    record.best_fitness = std::min(optimiser->best_value(), polisher ? polisher->best_value() : INFINITY);
+    record.evaluations = static_cast<int>(optimiser->evaluations() + (polisher ? polisher->evaluations() : 0));
     record.wall_time_s = elapsed();
     archive.commit_iteration(record, evaluations);
-    progress.best = optimiser->best_value();
+    progress.best = record.best_fitness;
     progress.elapsed_s = elapsed();
     printer.iteration_done(progress);
   }
@@ -405,6 +521,14 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
   result.iterations = evaluations.empty() ? 0 : evaluations.back().iteration + 1;
   result.top = top_distinct(result.all, 5);
   result.optimiser_status = optimise::to_string(optimiser->status());
+  if (config.polish.enabled) {
+    result.polished = true;
+    const long swarm_candidates = optimiser->evaluations();
+    result.polish_evaluations = std::max(0L, result.candidates - swarm_candidates);
+    result.swarm_best_fitness = optimiser->best_value();
+    result.polish_status = polisher ? optimise::to_string(polisher->status()) : "not started";
+  }
+  result.identifiability = identifiability(result.all, config);
   if (!std::isfinite(best)) {
     result.status = CampaignStatus::failed;
     result.message = "no run gave a finite fitness (" + std::to_string(result.failed_runs) + " failed)";

@@ -150,6 +150,20 @@ void parse_optimiser(const json& j, optimise::OptimiserOptions& o, const std::st
   }
 }
 
+void parse_polish(const json& j, PolishSpec& p, const std::string& where) {
+  reject_unknown_keys(j, {"algorithm", "max_evaluations", "initial_step", "xtol_rel"}, where);
+  p.enabled = true;
+  read_field(j, "algorithm", p.options.algorithm, where);
+  read_field(j, "max_evaluations", p.options.max_evaluations, where);
+  read_field(j, "initial_step", p.options.initial_step, where);
+  read_field(j, "xtol_rel", p.options.xtol_rel, where);
+}
+
+json polish_to_json(const PolishSpec& p) {
+  return {{"algorithm", p.options.algorithm}, {"max_evaluations", p.options.max_evaluations},
+          {"initial_step", p.options.initial_step}, {"xtol_rel", p.options.xtol_rel}};
+}
+
 json optimiser_to_json(const optimise::OptimiserOptions& o) {
   return {{"algorithm", o.algorithm},
           {"population", o.population},
@@ -279,6 +293,16 @@ void CampaignConfig::Validate() const {
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))
     throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + std::to_string(backend.timeout_s));
+  if (polish.enabled) {
+    try {
+      polish.options.Validate();
+    } catch (const std::exception& e) {
+      throw CampaignError(source + ": polish: " + e.what());
+    }
+  }
+  if (!(identifiability_band >= 0) || !std::isfinite(identifiability_band))
+    throw CampaignError(source + ": identifiability.relative_band: must be >= 0, got " +
+                        std::to_string(identifiability_band));
   if (output.empty()) throw CampaignError(source + ": output: empty output folder");
 }
 
@@ -297,6 +321,7 @@ json CampaignConfig::result_defining_json() const {
   json j = {{"cases", cases_json}, {"parameters", space.to_json()}, {"objective", objective_json},
             {"optimiser", optimiser_to_json(optimiser)}};
   if (backend.type == "command") j["command"] = backend.command;
+  if (polish.enabled) j["polish"] = polish_to_json(polish);  // absent otherwise: older keys unchanged
   return j;
 }
 
@@ -304,7 +329,9 @@ json CampaignConfig::to_json() const {
   json j = result_defining_json();
   j["name"] = name;
   j["backend"] = {{"type", backend.type}, {"threads", backend.threads}, {"command", backend.command},
-                  {"timeout_s", backend.timeout_s}, {"parallel", backend.parallel}};
+                  {"timeout_s", backend.timeout_s}, {"parallel", backend.parallel},
+                  {"fitness_threads", backend.fitness_threads}};
+  j["identifiability"] = {{"relative_band", identifiability_band}};
   j["output"] = output;
   j["report"] = report;
   return j;
@@ -314,7 +341,8 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
   CampaignConfig c;
   c.source = source;
   reject_unknown_keys(j, {"name", "scene", "measured", "cases", "parameters", "fixed", "tied", "objective",
-                          "optimiser", "backend", "output", "archive", "report", "description"},
+                          "optimiser", "backend", "output", "archive", "report", "description", "polish",
+                          "identifiability"},
                       source);
   read_field(j, "name", c.name, source);
   if (j.contains("cases")) {
@@ -374,13 +402,20 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
     if (b.is_string()) {
       c.backend.type = b.get<std::string>();
     } else {
-      reject_unknown_keys(b, {"type", "threads", "command", "timeout_s", "parallel"}, where);
+      reject_unknown_keys(b, {"type", "threads", "command", "timeout_s", "parallel", "fitness_threads"}, where);
+      read_field(b, "fitness_threads", c.backend.fitness_threads, where);
       read_field(b, "type", c.backend.type, where);
       read_field(b, "threads", c.backend.threads, where);
       read_field(b, "command", c.backend.command, where);
       read_field(b, "timeout_s", c.backend.timeout_s, where);
       read_field(b, "parallel", c.backend.parallel, where);
     }
+  }
+  if (j.contains("polish")) parse_polish(j.at("polish"), c.polish, source + ": polish");
+  if (j.contains("identifiability")) {
+    const std::string where = source + ": identifiability";
+    reject_unknown_keys(j.at("identifiability"), {"relative_band"}, where);
+    read_field(j.at("identifiability"), "relative_band", c.identifiability_band, where);
   }
   read_field(j, "output", c.output, source);
   read_field(j, "archive", c.archive, source);

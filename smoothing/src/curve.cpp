@@ -151,7 +151,10 @@ void split_name_unit(const std::string& raw, std::string* name, std::string* uni
 }
 
 std::string shown(const std::string& cell) {
-  return "'" + trim(cell) + "'";
+  std::string out(1, '\'');
+  out += trim(cell);
+  out += '\'';
+  return out;
 }
 
 }  // namespace

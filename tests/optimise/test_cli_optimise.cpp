@@ -44,11 +44,20 @@ TEST(CliOptimise, NloptAndPolish) {
   const Result r = run("optimise --function sphere --dim 2 --evals 100 --algorithm nlopt:LN_SBPLX --seed 1");
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_LT(nlohmann::json::parse(r.output)["best_value"].get<double>(), 1e-6);
-  const Result p = run("optimise --function sphere --dim 3 --evals 50 --algorithm pso --polish 200 --seed 1");
+  // The polish takes its 200 evaluations out of the 250: 50 for PSO, then LN_BOBYQA from its best.
+  const Result p = run("optimise --function sphere --dim 3 --evals 250 --algorithm pso --polish 200 --seed 1");
   ASSERT_EQ(p.status, 0) << p.output;
   const auto json = nlohmann::json::parse(p.output);
+  EXPECT_EQ(json["algorithm"], "pso+polish:LN_BOBYQA");
+  EXPECT_EQ(json["before_polish"]["evaluations"].get<long>(), 50);
+  EXPECT_LT(json["best_value"].get<double>(), 1e-6);
   EXPECT_LT(json["best_value"].get<double>(), json["before_polish"]["best_value"].get<double>());
   EXPECT_LE(json["evaluations"].get<long>(), 250);
+  EXPECT_EQ(json["evaluations"].get<long>(),
+            json["before_polish"]["evaluations"].get<long>() + json["polish"]["evaluations"].get<long>());
+  const Result too_much = run("optimise --evals 100 --polish 100");
+  EXPECT_EQ(too_much.status, 1);
+  EXPECT_NE(too_much.output.find("polish_evaluations = 100"), std::string::npos) << too_much.output;
 }
 
 TEST(CliOptimise, BadInputIsReported) {

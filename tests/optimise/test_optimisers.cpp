@@ -50,42 +50,71 @@ std::vector<Case> all_algorithms(long evaluations) {
 
 // ---- Sphere 3-D within 2000 evaluations -------------------------------------------------------
 
-class SphereConvergence : public ::testing::TestWithParam<std::pair<std::string, double>> {};
+// Every algorithm reaches < 1e-6 within 2000 evaluations in total. Those that cannot refine an
+// optimum on their own (the paper's GA, ISRES, ESCH; TBPSO, erratic in long runs with either
+// reading of Δx, see docs/optimise.md) get the polish: the last 200 of the 2000 evaluations go to
+// LN_BOBYQA from the best point. The test checks that the main algorithm really spent its 1800.
+struct SphereCase {
+  std::string label;
+  long polish_evaluations;
+};
 
-TEST_P(SphereConvergence, ReachesThresholdWithin2000Evaluations) {
-  const auto [label, threshold] = GetParam();
+class SphereConvergence : public ::testing::TestWithParam<SphereCase> {};
+
+TEST_P(SphereConvergence, ReachesOneInAMillionWithin2000Evaluations) {
+  const auto& [label, polish_evaluations] = GetParam();
   const TestFunction sphere = make_test_function("sphere", 3);
   for (const auto& c : all_algorithms(2000)) {
     if (c.label != label) continue;
     for (std::uint64_t seed : {1, 2, 3}) {
       OptimiserOptions options = c.options;
       options.seed = seed;
+      options.polish_evaluations = polish_evaluations;
       auto opt = make_optimiser(space_of(sphere), options);
       const auto summary = minimise(*opt, sphere.evaluate);
-      EXPECT_LE(summary.evaluations, 2000);
-      EXPECT_LT(summary.best_value, threshold) << label << " seed " << seed;
+      EXPECT_LE(summary.evaluations, 2000) << label << " seed " << seed;
+      EXPECT_LT(summary.best_value, 1e-6) << label << " seed " << seed;
       EXPECT_NE(summary.status, OptimiserStatus::failed) << summary.message;
       EXPECT_DOUBLE_EQ(sphere.evaluate(summary.best_x), summary.best_value);
+      const auto report = opt->polish_report();
+      ASSERT_EQ(report.has_value(), polish_evaluations > 0);
+      if (report) {
+        EXPECT_TRUE(report->polishing) << label;
+        EXPECT_EQ(report->main_evaluations, 2000 - polish_evaluations) << label << " seed " << seed;
+        EXPECT_EQ(report->main_evaluations + report->polish_evaluations, summary.evaluations);
+        EXPECT_LE(summary.best_value, report->main_best_value);
+      }
     }
     return;
   }
   FAIL() << "no case " << label;
 }
 
-// The required 1e-6 for every algorithm that can refine a continuous optimum. TBPSO with the
-// paper's printed reading of Δx (pushed away from trusted particles) is erratic: seeds 1-3 reach
-// 3e-9, 4e-5, 6e-7 (seed 6: 0.22), so it is held to 1e-4 on seeds 1-3. The paper's GA
-// (random-reset mutation only) and NLopt's ISRES/ESCH with their default settings cannot get there
-// in 2000 evaluations (docs/optimise.md); they are held to the levels they reliably reach.
 INSTANTIATE_TEST_SUITE_P(
     Optimise, SphereConvergence,
-    ::testing::Values(std::make_pair("pso", 1e-6), std::make_pair("tbpso_toward", 1e-6),
-                      std::make_pair("tbpso_paper", 1e-4), std::make_pair("ga_gaussian_elitist", 1e-6),
-                      std::make_pair("nlopt_GN_DIRECT_L", 1e-6), std::make_pair("nlopt_GN_CRS2_LM", 1e-6),
-                      std::make_pair("nlopt_LN_BOBYQA", 1e-6), std::make_pair("nlopt_LN_NELDERMEAD", 1e-6),
-                      std::make_pair("nlopt_LN_SBPLX", 1e-6), std::make_pair("ga_paper", 0.5),
-                      std::make_pair("nlopt_GN_ISRES", 0.2), std::make_pair("nlopt_GN_ESCH", 1e-2)),
-    [](const auto& info) { return info.param.first; });
+    ::testing::Values(
+        // On their own.
+        SphereCase{"pso", 0}, SphereCase{"ga_gaussian_elitist", 0}, SphereCase{"nlopt_GN_DIRECT_L", 0},
+        SphereCase{"nlopt_GN_CRS2_LM", 0}, SphereCase{"nlopt_LN_BOBYQA", 0}, SphereCase{"nlopt_LN_NELDERMEAD", 0},
+        SphereCase{"nlopt_LN_SBPLX", 0},
+        // With the polish (200 of the 2000 evaluations): every global algorithm.
+        SphereCase{"pso", 200}, SphereCase{"tbpso_paper", 200}, SphereCase{"tbpso_toward", 200},
+        SphereCase{"ga_paper", 200}, SphereCase{"ga_gaussian_elitist", 200}, SphereCase{"nlopt_GN_DIRECT_L", 200},
+        SphereCase{"nlopt_GN_CRS2_LM", 200}, SphereCase{"nlopt_GN_ISRES", 200}, SphereCase{"nlopt_GN_ESCH", 200}),
+    [](const auto& info) {
+      return info.param.label + (info.param.polish_evaluations > 0 ? "_polished" : "");
+    });
+
+// Without the polish, the paper's GA, ISRES and ESCH stay far from 1e-6 at 2000 evaluations: the
+// polish is what gets them there (this guards the statement in docs/optimise.md).
+TEST(Optimiser, PaperGaIsresEschNeedThePolish) {
+  const TestFunction sphere = make_test_function("sphere", 3);
+  for (const auto& c : all_algorithms(2000)) {
+    if (c.label != "ga_paper" && c.label != "nlopt_GN_ISRES" && c.label != "nlopt_GN_ESCH") continue;
+    auto opt = make_optimiser(space_of(sphere), c.options);
+    EXPECT_GT(minimise(*opt, sphere.evaluate).best_value, 1e-5) << c.label;
+  }
+}
 
 // ---- exact resume -----------------------------------------------------------------------------
 
@@ -148,6 +177,103 @@ INSTANTIATE_TEST_SUITE_P(Optimise, Resume,
                          ::testing::Values("pso", "tbpso_toward", "tbpso_paper", "ga_paper", "ga_gaussian_elitist",
                                            "nlopt_GN_DIRECT_L", "nlopt_GN_CRS2_LM", "nlopt_GN_ISRES", "nlopt_GN_ESCH",
                                            "nlopt_LN_BOBYQA", "nlopt_LN_NELDERMEAD", "nlopt_LN_SBPLX"));
+
+// Resume with the polish: saved in the main phase, right at the switch, and during the polish.
+TEST(Optimiser, PolishedRunResumesExactlyInEveryPhase) {
+  const TestFunction f = make_test_function("rastrigin", 3);
+  for (const auto& c : all_algorithms(120)) {
+    if (c.label != "pso" && c.label != "tbpso_paper" && c.label != "ga_paper" && c.label != "nlopt_GN_ESCH") continue;
+    OptimiserOptions options = c.options;
+    options.polish_evaluations = 60;
+    const bool nlopt_main = c.label.rfind("nlopt_", 0) == 0;
+    // PSO/TBPSO/GA: 6 rounds of 10 then polish points; ESCH: 60 rounds of 1 then polish points.
+    const std::vector<int> stops = nlopt_main ? std::vector<int>{3, 60, 75} : std::vector<int>{3, 6, 20};
+    auto uninterrupted = make_optimiser(space_of(f), options);
+    const auto full = run_recording(*uninterrupted, f);
+    ASSERT_TRUE(uninterrupted->polish_report()->polishing) << c.label;
+    for (int stop : stops)
+      for (bool pending : {false, true}) {
+        auto first = make_optimiser(space_of(f), options);
+        auto trace = run_recording(*first, f, stop);
+        if (pending) first->ask();
+        const std::string saved = first->save_state().dump();
+        first.reset();
+        auto resumed = make_optimiser(space_of(f), options);
+        resumed->load_state(nlohmann::json::parse(saved));
+        const auto rest = run_recording(*resumed, f);
+        trace.insert(trace.end(), rest.begin(), rest.end());
+        ASSERT_EQ(trace, full) << c.label << " stop " << stop << " pending " << pending;
+        EXPECT_EQ(resumed->best_value(), uninterrupted->best_value());
+        EXPECT_EQ(resumed->evaluations(), uninterrupted->evaluations());
+        EXPECT_LE(resumed->evaluations(), 120);
+        EXPECT_EQ(resumed->status(), uninterrupted->status());
+      }
+  }
+}
+
+TEST(Optimiser, PolishPhaseBehaviour) {
+  const TestFunction f = make_test_function("sphere", 3);
+  OptimiserOptions o = with("pso", 100);
+  o.polish_evaluations = 40;
+  auto opt = make_optimiser(space_of(f), o);
+  EXPECT_EQ(opt->name(), "pso+polish:LN_BOBYQA");
+  EXPECT_FALSE(opt->polish_report()->polishing);
+  // Main phase: whole swarms, substitution allowed.
+  for (int round = 0; round < 6; ++round) {
+    const auto batch = opt->ask();
+    ASSERT_EQ(batch.size(), 10u) << round;
+    EXPECT_TRUE(opt->can_substitute());
+    std::vector<double> values;
+    for (const auto& x : batch) values.push_back(f.evaluate(x));
+    opt->tell(values);
+  }
+  const auto report = opt->polish_report();
+  EXPECT_TRUE(report->polishing);
+  EXPECT_EQ(report->main_evaluations, 60);
+  // Polish: single points, the first one is the main phase's best; no substitution.
+  const auto first = opt->ask();
+  ASSERT_EQ(first.size(), 1u);
+  EXPECT_TRUE(first[0].isApprox(report->main_best_x, 1e-12));
+  EXPECT_FALSE(opt->can_substitute());
+  EXPECT_THROW(opt->substitute(0, f.optimum), std::logic_error);
+  opt->tell({f.evaluate(first[0])});
+  const auto summary = minimise(*opt, f.evaluate);
+  EXPECT_EQ(summary.evaluations, 100);
+  EXPECT_LT(summary.best_value, 1e-3 * report->main_best_value);
+  EXPECT_TRUE(opt->ask().empty());
+  EXPECT_THROW(opt->tell({1.0}), std::logic_error);
+  EXPECT_FALSE(make_optimiser(space_of(f), with("pso", 100))->polish_report().has_value());
+}
+
+TEST(Optimiser, PolishStartsAtTheCentreWhenTheMainPhaseFoundNothing) {
+  const TestFunction f = make_test_function("sphere", 2);
+  OptimiserOptions o = with("ga", 50);
+  o.polish_evaluations = 30;
+  auto opt = make_optimiser(space_of(f), o);
+  for (int round = 0; round < 2; ++round) {
+    const auto batch = opt->ask();
+    opt->tell(std::vector<double>(batch.size(), std::nan("")));
+  }
+  EXPECT_TRUE(std::isinf(opt->polish_report()->main_best_value));
+  const auto first = opt->ask();
+  ASSERT_EQ(first.size(), 1u);
+  EXPECT_TRUE(first[0].isApprox(0.5 * (f.lower + f.upper), 1e-12));
+  const auto summary = minimise(*opt, f.evaluate);
+  EXPECT_EQ(summary.evaluations, 50);
+  EXPECT_TRUE(std::isfinite(summary.best_value));
+}
+
+TEST(Optimiser, PolishIsSkippedWhenTheTargetIsReached) {
+  const TestFunction f = make_test_function("sphere", 3);
+  OptimiserOptions o = with("pso", 2000);
+  o.polish_evaluations = 200;
+  o.target_value = 1e-2;
+  auto opt = make_optimiser(space_of(f), o);
+  const auto summary = minimise(*opt, f.evaluate);
+  EXPECT_EQ(summary.status, OptimiserStatus::target_reached);
+  EXPECT_FALSE(opt->polish_report()->polishing);
+  EXPECT_LT(summary.evaluations, 1800);
+}
 
 // ---- behaviour ----------------------------------------------------------------------------------
 
@@ -316,6 +442,11 @@ TEST(Optimiser, BadOptionsAreNamed) {
   expect_invalid([&] { make([](auto& o) { o.inertia_start = std::nan(""); }); }, "inertia_start = nan");
   expect_invalid([&] { make([](auto& o) { o.algorithm = "pso"; o.constriction = true; o.pso_cognitive = 1.0; }); }, "phi");
   expect_invalid([&] { make([](auto& o) { o.elitism = 10; }); }, "elitism = 10");
+  expect_invalid([&] { make([](auto& o) { o.polish_evaluations = 200; }); }, "polish_evaluations = 200");
+  expect_invalid([&] { make([](auto& o) { o.polish_evaluations = -1; }); }, "polish_evaluations = -1");
+  expect_invalid([&] { make([](auto& o) { o.polish_evaluations = 50; o.polish_algorithm = "LN_FOO"; }); }, "'LN_FOO'");
+  expect_invalid([&] { make([](auto& o) { o.polish_evaluations = 50; o.polish_initial_step = 0.0; }); },
+                 "polish_initial_step = 0");
   expect_invalid([&] { make([](auto& o) { o.algorithm = "nlopt:LN_BOBYQA"; o.initial_point = {1e12}; }); }, "'kn'");
   expect_invalid([&] { make([](auto& o) { o.initial_point = {1e9, 2.0}; }); }, "initial_point");
   expect_invalid([&] { make_optimiser(ParameterSpace().add("kn", 2.0, 1.0), OptimiserOptions{}); }, "'kn'");
@@ -339,6 +470,9 @@ TEST(Optimiser, MisuseOfAskTellAndStateIsRejected) {
   state.erase("v");
   auto pso2 = make_optimiser(space, with("pso", 100));
   expect_invalid([&] { pso2->load_state(state); }, "'v'");
+  OptimiserOptions polished = with("pso", 100);
+  polished.polish_evaluations = 20;
+  expect_invalid([&] { make_optimiser(space, polished)->load_state(pso->save_state()); }, "'pso', not 'pso+polish");
   auto bobyqa = make_optimiser(space, with("nlopt:LN_BOBYQA", 100));
   EXPECT_THROW(bobyqa->tell({1.0}), std::logic_error);
 }

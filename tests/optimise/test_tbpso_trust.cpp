@@ -120,3 +120,40 @@ TEST(TbpsoTrust, ConstrictionFactor) {
   EXPECT_NEAR(constriction_factor(4.1), 0.729843788, 1e-9);
   EXPECT_THROW(constriction_factor(3.9), std::invalid_argument);
 }
+
+TEST(TbpsoTrust, VelocityClampAppliesToTheTrustTerm) {
+  // Only the trust term moves the particles (ω = φ1 = φ2 = 0); with a huge trust C the term is
+  // ~1e12 unit-cube lengths, and the clamp must still hold every component to max_velocity.
+  ParameterSpace space;
+  space.add("a", 0.0, 1.0).add("b", 0.0, 1.0);
+  OptimiserOptions options;
+  options.algorithm = "tbpso";
+  options.population = 3;
+  options.iterations = 10;
+  options.inertia_start = options.inertia_end = 0.0;
+  options.tbpso_cognitive = options.tbpso_social = 0.0;
+  options.max_velocity = 0.1;
+  options.bounds = BoundHandling::reflect;  // keeps |v| when a move leaves the cube
+  for (const char* direction : {"paper", "toward"}) {
+    options.trust_direction = direction;
+    auto first = make_optimiser(space, options);
+    first->ask();
+    first->tell({3.0, 2.0, 1.0});
+    auto state = first->save_state();
+    state["trust"] = {{0.0, 1e12, 1e12}, {0.0, 0.0, 1e12}, {0.0, 0.0, 0.0}};
+    auto opt = make_optimiser(space, options);
+    opt->load_state(state);
+    opt->ask();
+    opt->tell({3.0, 2.0, 1.0});  // everyone ties its best ("improved"): C = 1e12 + 1 where i is worse
+    const auto after = opt->save_state();
+    for (int i = 0; i < 3; ++i)
+      for (int k = 0; k < 2; ++k) {
+        const double v = after["v"][i][k].get<double>();
+        EXPECT_LE(std::abs(v), 0.1) << direction << " particle " << i;
+        // Particles 1 and 2 trust someone: their trust term saturates the clamp in every coordinate
+        // (positions differ in both coordinates). Particle 3 is the best: no trust term, no motion.
+        if (i < 2) EXPECT_EQ(std::abs(v), 0.1) << direction << " particle " << i;
+        else EXPECT_EQ(v, 0.0) << direction;
+      }
+  }
+}

@@ -14,6 +14,9 @@
 #include <map>
 #include <random>
 #include <set>
+#include <thread>
+#include <atomic>
+#include <chrono>
 
 namespace fs = std::filesystem;
 using namespace demcal::pipelines;
@@ -210,42 +213,62 @@ TEST(Campaign, KilledAndResumedCampaignEndsWithTheUninterruptedResult) {
   const auto dir = fresh_dir("resume");
   auto campaign = toy_campaign(dir);
   campaign["objective"] = {{"type", 2}, {"smoother", {{"epochs", 40}}}};
-  campaign["optimiser"] = {{"algorithm", "tbpso"}, {"population", 6}, {"iterations", 6}, {"seed", 11}};
+  campaign["optimiser"] = {{"algorithm", "tbpso"}, {"population", 6}, {"iterations", 8}, {"seed", 11}};
   campaign.erase("output");
   {
     std::ofstream(dir / "campaign.json") << campaign.dump(2);
   }
   const std::string log = (dir / "simulator.log").string();
   ::setenv("TOY_SIMULATOR_LOG", log.c_str(), 1);
-  auto demcal = [&](const std::string& out, bool resume, double timeout) {
+  auto demcal = [&](const std::string& out, bool resume, double timeout, const std::atomic<bool>* kill = nullptr) {
     ProcessOptions o;
     o.argv = {DEMCAL_BINARY, "calibrate", (dir / "campaign.json").string(), "--out", (dir / out).string(), "--quiet"};
     if (resume) o.argv.push_back("--resume");
-    o.timeout_s = timeout;  // expiry = SIGKILL
+    o.timeout_s = timeout;
+    o.cancel = kill;  // raised = SIGKILL to the process group
     o.stderr_path = (dir / (out + ".stderr")).string();
     return run_process(o);
   };
+  auto logged_runs = [&] {
+    std::ifstream in(log);
+    size_t lines = 0;
+    for (std::string line; std::getline(in, line);) ++lines;
+    return lines;
+  };
   const auto reference = demcal("uninterrupted", false, 300);
   ASSERT_TRUE(reference.ok()) << reference.message;
+  const size_t reference_runs = logged_runs();
+  ASSERT_GE(reference_runs, 36u);
   fs::remove(log);
 
+  // Each killed attempt is killed (SIGKILL) after it has visibly progressed: once the simulator log
+  // has grown by a random 2..5 finished runs, plus a random 0..60 ms so that the kill lands
+  // anywhere (inside a simulation, an objective, an archive commit). Three such kills use far fewer
+  // than the reference's >= 36 runs, so every one of them happens whatever the machine's load; the
+  // fourth attempt runs to the end.
   std::mt19937 rng(2024);
-  std::uniform_real_distribution<double> moment(0.3, 1.2);
+  std::uniform_int_distribution<int> runs_before_kill(2, 5);
+  std::uniform_int_distribution<int> extra_ms(0, 60);
   int kills = 0;
-  bool finished = false;
-  for (int attempt = 0; attempt < 12 && !finished; ++attempt) {
-    const bool last_chance = attempt >= 5;
-    const auto r = demcal("killed", attempt > 0, last_chance ? 300 : moment(rng));
-    if (r.status == ProcessStatus::timed_out) {
-      ++kills;
-    } else {
-      ASSERT_TRUE(r.ok()) << r.message;
-      finished = true;
-    }
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    const size_t target = logged_runs() + static_cast<size_t>(runs_before_kill(rng));
+    const int delay_ms = extra_ms(rng);
+    std::atomic<bool> kill{false}, ended{false};
+    std::thread watcher([&] {
+      while (!ended.load() && logged_runs() < target) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
+      kill.store(true);
+    });
+    const auto r = demcal("killed", attempt > 0, 300, &kill);
+    ended.store(true);
+    watcher.join();
+    ASSERT_EQ(r.status, ProcessStatus::cancelled) << "attempt " << attempt << " was not killed: " << r.message;
+    ++kills;
   }
+  const auto last = demcal("killed", true, 300);
   ::unsetenv("TOY_SIMULATOR_LOG");
-  ASSERT_TRUE(finished);
-  EXPECT_GE(kills, 2);
+  ASSERT_TRUE(last.ok()) << last.message;
+  EXPECT_EQ(kills, 3);
 
   auto comparable = [](json j) {
     j.erase("wall_time_s");

@@ -54,6 +54,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -134,6 +135,19 @@ struct OptimiserOptions {
   double xtol_rel = 0.0;               // NLopt stopping tolerances (0 = off); the budget always holds
   double ftol_abs = 0.0;
 
+  // Polish (not in the paper; off by default): the last polish_evaluations of the budget go to a
+  // local NLopt run started from the best point of the main (global) phase. The main phase gets
+  // evaluation_budget() - polish_evaluations (which also sets its planned iterations); if it stops
+  // early (NLopt's own criteria), the polish gets everything that is left. The total never exceeds
+  // evaluation_budget(). The polish is skipped when the main phase reached target_value or failed;
+  // if the main phase found no finite value, the polish starts at the centre of the box. Works for
+  // every algorithm; it is what lets the paper's GA, GN_ISRES, GN_ESCH and TBPSO refine an optimum
+  // to 1e-6 (docs/optimise.md). The ask/tell contract is unchanged: batches of the main algorithm,
+  // then batches of one point; can_substitute() is false during the polish.
+  long polish_evaluations = 0;             // 0 = off; else >= 1 and < evaluation_budget()
+  std::string polish_algorithm = "LN_BOBYQA";  // an NLopt name from nlopt_algorithms(), normally LN_*
+  double polish_initial_step = 0.05;       // NLopt initial step of the polish, unit-cube lengths, > 0
+
   // Throws std::invalid_argument naming the option and its value.
   void Validate() const;
   // Evaluation budget actually used (max_evaluations, or population * iterations).
@@ -184,6 +198,17 @@ class Optimiser {
   const ParameterSpace& space() const { return space_; }
   const OptimiserOptions& options() const { return options_; }
 
+  // With options.polish_evaluations > 0: how the two phases went (nullopt without a polish).
+  struct PolishReport {
+    bool polishing = false;            // true once the polish phase has started
+    double main_best_value = std::numeric_limits<double>::infinity();  // best of the main phase
+    Eigen::VectorXd main_best_x;       // physical; empty if the main phase found no finite value
+    long main_evaluations = 0;         // evaluations spent by the main phase
+    long polish_evaluations = 0;       // evaluations spent by the polish so far
+    std::string polish_status;         // to_string(status) of the polish run ("" before it starts)
+  };
+  virtual std::optional<PolishReport> polish_report() const { return std::nullopt; }
+
  protected:
   Optimiser(ParameterSpace space, OptimiserOptions options, std::string name);
   // Records one told value for a unit-cube point (updates best, evaluations; non-finite -> +inf).
@@ -194,6 +219,8 @@ class Optimiser {
   nlohmann::json save_common() const;
   void load_common(const nlohmann::json& state);
   Eigen::VectorXd physical(const Eigen::VectorXd& unit) const;
+  // Best unit-cube point of another optimiser (for optimisers that drive others).
+  static const Eigen::VectorXd& best_unit_of(const Optimiser& other) { return other.best_unit_; }
 
   ParameterSpace space_;
   OptimiserOptions options_;

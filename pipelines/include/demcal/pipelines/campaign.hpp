@@ -85,6 +85,20 @@ struct BackendSpec {
   std::string command;                 // command backend: argument template (backend.hpp)
   double timeout_s = 0;                // command backend: s per run, 0 = none
   int parallel = 0;                    // command backend: programs at once, <= 0 = hardware threads
+  int fitness_threads = 0;             // threads computing objectives (objective 2 trains networks)
+                                       // while simulations run; <= 0 = every hardware thread.
+                                       // Does not change any result.
+};
+
+// Optional local polish after the swarm (campaign key "polish"): a local NLopt run (default
+// LN_BOBYQA) started from the swarm's best point, one simulation per step, in the same parameter
+// space. Meant for narrow basins the swarm finds but does not descend (the arch's friction angle:
+// the failure mode switches between sliding and hinging within a few degrees). Its evaluations are
+// archived and counted like the swarm's; --resume continues it exactly.
+//   "polish": {"algorithm": "LN_BOBYQA", "max_evaluations": 30, "initial_step": 0.05, "xtol_rel": 0}
+struct PolishSpec {
+  bool enabled = false;
+  optimise::PolishOptions options;     // initial_step in unit-cube lengths of the parameter space
 };
 
 struct CampaignConfig {
@@ -100,6 +114,12 @@ struct CampaignConfig {
   std::string output = "calibration";  // output folder: result.json, report.md, archive.sqlite
   std::string archive;                 // "" = <output>/archive.sqlite
   bool report = true;                  // write report.md and figures
+  PolishSpec polish;                   // off unless the campaign has a "polish" object
+  // Identifiability band (campaign key "identifiability": {"relative_band": r}): parameter sets
+  // whose fitness is within best x (1 + r) are reported as indistinguishable from the best.
+  // 0 = 1/sqrt(2 x objective points) (0.05 for 200 points): the relative spread of a fitness value
+  // (a root sum of squares over `points` residuals) under a fresh draw of measurement noise.
+  double identifiability_band = 0;
 
   // Throws CampaignError naming the key and value: no case, a case without measured file or
   // scene (scene not needed for the command backend), negative weights, bad objective type,
@@ -149,6 +169,20 @@ struct ParameterSet {
 
 enum class CampaignStatus { completed, failed };
 
+// How well the data pin each free parameter: the range of the parameter over the distinct
+// evaluated sets whose fitness is within the band (best x (1 + relative_band)). The sets are those
+// the optimiser happened to evaluate, so the ranges are lower bounds of the indistinguishable region.
+struct ParameterRange {
+  double best = 0, min = 0, max = 0;   // SI (friction in degrees)
+};
+struct Identifiability {
+  double relative_band = 0;
+  double band_fitness = std::numeric_limits<double>::quiet_NaN();
+  long sets_in_band = 0;               // distinct parameter sets within the band
+  std::map<std::string, ParameterRange> parameters;  // every free parameter
+  nlohmann::json to_json() const;      // ranges, plus max/min ratio for log-scaled parameters
+};
+
 struct CampaignResult {
   CampaignStatus status = CampaignStatus::completed;
   std::string message;
@@ -164,6 +198,11 @@ struct CampaignResult {
   long simulated_this_session = 0;           // runs actually simulated (not read from the archive)
   long reused_from_archive = 0;
   std::string optimiser_status;
+  bool polished = false;                     // the campaign has a polish phase
+  long polish_evaluations = 0;               // candidates evaluated by the polish
+  double swarm_best_fitness = std::numeric_limits<double>::quiet_NaN();  // before the polish
+  std::string polish_status;
+  Identifiability identifiability;
   nlohmann::json to_json() const;            // the result.json layout
 };
 

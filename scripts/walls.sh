@@ -1,0 +1,155 @@
+#!/usr/bin/env bash
+# Calibration against the Lourenço 2005 wall tests (data/walls/, docs/walls.md):
+#   1. the boundary-condition trial on SW.30.1 (top beam held level / free to rotate);
+#   2. one campaign per wall test (kn, ks, friction; TBPSO 10 x 10, objective 1);
+#   3. the worth test: SW.30.1 + SW.100.1 calibrated together, then SW.200.1 and SW.250.1 predicted;
+#   4. the fidelity check of the fast run settings: the calibrated SW.30.1 and SW.250.1 runs repeated
+#      at 2 mm/s with 15 contact points per joint;
+#   5. the tables of docs/walls.md rewritten between their <!-- walls:NAME --> markers.
+# Every campaign keeps its archive (demo-out/walls/<name>/archive.sqlite), so a second run of this
+# script re-simulates nothing and only rebuilds the tables.
+#
+# Usage: scripts/walls.sh [BUILD_DIR] [STEP...]   (steps: trial walls worth fidelity tables; default all)
+set -euo pipefail
+build=${1:-build}
+shift || true
+steps=${*:-trial walls worth fidelity tables}
+demcal="$build/demcal"
+out=demo-out/walls
+data=data/walls
+mkdir -p "$out"
+has_step() { [[ " $steps " == *" $1 "* ]]; }
+
+# Calibrate one campaign file, then simulate its cases with the best set (the calibrated curves).
+calibrate() {
+  local name=$1
+  echo "== $name"
+  "$demcal" calibrate "$data/$name.json" --out "$out/$name"
+  "$demcal" predict "$data/$name.json" --result "$out/$name/result.json" --out "$out/$name/fit"
+}
+
+if has_step trial; then
+  calibrate SW.30.1
+  calibrate SW.30.1-beam-rotation
+fi
+
+if has_step walls; then
+  for wall in SW.30.2 SW.100.1 SW.100.2 SW.200.1 SW.200.2 SW.250.1; do calibrate "$wall"; done
+fi
+
+if has_step worth; then
+  calibrate worth-SW30-SW100
+  echo "== prediction of SW.200.1 and SW.250.1 with the SW.30.1 + SW.100.1 parameters"
+  "$demcal" predict "$data/predict-SW200-SW250.json" --result "$out/worth-SW30-SW100/result.json" \
+    --out "$out/worth-SW30-SW100/predict"
+fi
+
+if has_step fidelity; then
+  # The same campaign cases with the slow, faithful settings: 2 mm/s, 15 contact points per joint.
+  mkdir -p "$out/fidelity"
+  for wall in SW.30.1 SW.250.1; do
+    python3 - "$data/$wall.json" "$out/fidelity/$wall-slow.json" <<'PY'
+import json, os, sys
+source, target = sys.argv[1], sys.argv[2]
+c = json.load(open(source))
+for case in c["cases"]:
+    case["scene"]["options"].update({"velocity": 0.002, "contacts_per_joint": 15})
+    case["measured"]["file"] = os.path.abspath(os.path.join(os.path.dirname(source), case["measured"]["file"]))
+c["name"] += "-slow"
+json.dump(c, open(target, "w"), indent=2)
+PY
+    echo "== fidelity: $wall at 2 mm/s, 15 contact points"
+    "$demcal" predict "$out/fidelity/$wall-slow.json" --result "$out/$wall/result.json" --out "$out/fidelity/$wall-slow"
+    "$demcal" fitness --objective 1 -e "$out/fidelity/$wall-slow/$wall.csv" -s "$out/$wall/fit/$wall.csv" \
+      > "$out/fidelity/$wall-fast-vs-slow.json"
+  done
+fi
+
+if has_step tables; then
+  python3 - "$out" docs/walls.md <<'PY'
+import json, math, os, re, sys
+out, doc = sys.argv[1], sys.argv[2]
+
+def load(path):
+    return json.load(open(path)) if os.path.exists(path) else None
+
+def kN(v): return "–" if v is None else f"{v / 1e3:.1f}"
+def pct(v): return "–" if v is None else f"{100 * v:+.0f} %"
+
+def param_cells(result):
+    p = result["best"]["params"]
+    return [f"{p['kn'] / 1e9:.3g}", f"{p['ks'] / 1e9:.3g}", f"{p['friction_deg']:.1f}"]
+
+def case_cells(c):
+    rms_share = c["rms_error"] / c["measured_peak"] if c["rms_error"] is not None and c["measured_peak"] else None
+    return [kN(c["measured_peak"]), kN(c["simulated_peak"]), pct(c["peak_error"]), f"{c['rms_error'] / 1e3:.2f}"
+            if c["rms_error"] is not None else "–", "–" if rms_share is None else f"{100 * rms_share:.0f} %"]
+
+def row(cells): return "| " + " | ".join(cells) + " |"
+
+tables = {}
+walls = ["SW.30.1", "SW.30.2", "SW.100.1", "SW.100.2", "SW.200.1", "SW.200.2", "SW.250.1"]
+stress = {"SW.30": 0.15, "SW.100": 0.50, "SW.200": 1.00, "SW.250": 1.25}
+head = ["test", "σ0 (MPa)", "kn (GPa/m)", "ks (GPa/m)", "φ (°)", "objective 1 (kN)", "peak measured (kN)",
+        "peak calibrated (kN)", "peak error", "RMS error (kN)", "RMS / peak", "simulations", "wall time (s)"]
+lines = [row(head), row(["---"] * len(head))]
+for w in walls:
+    r, f = load(f"{out}/{w}/result.json"), load(f"{out}/{w}/fit/prediction.json")
+    if not r or not f: lines.append(row([w] + ["not run"] + [""] * (len(head) - 2))); continue
+    lines.append(row([w, f"{stress[w.rsplit('.', 1)[0]]:.2f}"] + param_cells(r) + [kN(r["best"]["fitness"])]
+                     + case_cells(f["cases"][0]) + [str(r["simulations"]), f"{r['wall_time_s']:.0f}"]))
+tables["per-wall"] = lines
+
+head = ["top beam", "kn (GPa/m)", "ks (GPa/m)", "φ (°)", "objective 1 (kN)", "peak measured (kN)",
+        "peak calibrated (kN)", "peak error", "RMS error (kN)", "RMS / peak"]
+lines = [row(head), row(["---"] * len(head))]
+for label, name in [("held level (rotation fixed)", "SW.30.1"), ("free to rotate", "SW.30.1-beam-rotation")]:
+    r, f = load(f"{out}/{name}/result.json"), load(f"{out}/{name}/fit/prediction.json")
+    if not r or not f: lines.append(row([label, "not run"] + [""] * (len(head) - 2))); continue
+    lines.append(row([label] + param_cells(r) + [kN(r["best"]["fitness"])] + case_cells(f["cases"][0])))
+tables["boundary"] = lines
+
+head = ["test", "role", "peak measured (kN)", "peak simulated (kN)", "peak error", "RMS error (kN)", "RMS / peak",
+        "RMS of its own calibration (kN)"]
+lines = [row(head), row(["---"] * len(head))]
+r = load(f"{out}/worth-SW30-SW100/result.json")
+fit, pred = load(f"{out}/worth-SW30-SW100/fit/prediction.json"), load(f"{out}/worth-SW30-SW100/predict/prediction.json")
+if r and fit and pred:
+    for role, doc_cases in [("calibrated on", fit["cases"]), ("predicted", pred["cases"])]:
+        for c in doc_cases:
+            own = load(f"{out}/{c['name']}/fit/prediction.json")
+            own_rms = f"{own['cases'][0]['rms_error'] / 1e3:.2f}" if own and own["cases"][0]["rms_error"] is not None else "–"
+            lines.append(row([c["name"], role] + case_cells(c) + [own_rms]))
+    p = r["best"]["params"]
+    lines.append("")
+    lines.append(f"Joint set calibrated on SW.30.1 + SW.100.1: kn = {p['kn'] / 1e9:.3g} GPa/m, "
+                 f"ks = {p['ks'] / 1e9:.3g} GPa/m, φ = {p['friction_deg']:.1f}°; objective 1 (sum of both cases) "
+                 f"= {r['best']['fitness'] / 1e3:.1f} kN after {r['simulations']} simulations ({r['wall_time_s']:.0f} s).")
+else:
+    lines.append(row(["not run"] + [""] * (len(head) - 1)))
+tables["worth"] = lines
+
+head = ["test", "settings", "peak (kN)", "peak change", "RMS difference fast vs slow (kN)", "steps", "run wall time (s)"]
+lines = [row(head), row(["---"] * len(head))]
+for w in ["SW.30.1", "SW.250.1"]:
+    fast, slow = load(f"{out}/{w}/fit/prediction.json"), load(f"{out}/fidelity/{w}-slow/prediction.json")
+    cmp_ = load(f"{out}/fidelity/{w}-fast-vs-slow.json")
+    if not fast or not slow or not cmp_: lines.append(row([w, "not run"] + [""] * (len(head) - 2))); continue
+    fc, sc = fast["cases"][0], slow["cases"][0]
+    rms = cmp_["fitness"] / math.sqrt(200)
+    lines.append(row([w, "slow: 2 mm/s, 15 points per joint", kN(sc["simulated_peak"]), "", "",
+                      str(sc["engine"]["steps"]), f"{sc['wall_time_s']:.1f}"]))
+    lines.append(row([w, "fast: 20 mm/s, 5 points per joint", kN(fc["simulated_peak"]),
+                      pct(fc["simulated_peak"] / sc["simulated_peak"] - 1), f"{rms / 1e3:.2f}",
+                      str(fc["engine"]["steps"]), f"{fc['wall_time_s']:.1f}"]))
+tables["fidelity"] = lines
+
+text = open(doc).read()
+for name, lines in tables.items():
+    pattern = re.compile(r"(<!-- walls:%s -->\n).*?(<!-- /walls:%s -->)" % (name, name), re.S)
+    if not pattern.search(text): sys.exit(f"{doc}: no <!-- walls:{name} --> ... <!-- /walls:{name} --> markers")
+    text = pattern.sub(lambda m: m.group(1) + "\n".join(lines) + "\n" + m.group(2), text)
+open(doc, "w").write(text)
+print(f"rewrote the tables of {doc}")
+PY
+fi
