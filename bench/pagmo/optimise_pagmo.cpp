@@ -2,6 +2,7 @@
 // TBPSO (both readings of Δx), GA, the NLopt algorithms, and pagmo2's pso and sga, at equal
 // evaluation budgets, on Sphere, Rosenbrock, Rastrigin and Ackley (shifted, see test_functions.hpp)
 // in 3 and 10 dimensions, at 200 and 500 evaluations, over 25 seeds. Prints Markdown tables.
+// Rows "<algorithm>+polish" give the last fifth of the budget to a LN_BOBYQA polish from the best.
 //
 //   bench_optimise_pagmo [--seeds N] [--quick]     (--quick: 5 seeds, 3-D only)
 //   bench_optimise_pagmo [--seeds N] --sphere-2000  (Sphere 3-D, 2000 evaluations, with and without
@@ -74,11 +75,19 @@ double run_demcal(const std::string& algorithm, const TestFunction& f, long budg
   options.max_evaluations = budget;
   options.seed = seed;
   options.algorithm = algorithm;
-  if (algorithm == "tbpso:paper" || algorithm == "tbpso:toward") {
-    options.algorithm = "tbpso";
-    options.trust_direction = algorithm.substr(6);
+  // "<algorithm>+polish": the last fifth of the budget goes to the LN_BOBYQA polish.
+  const std::string suffix = "+polish";
+  std::string base = algorithm;
+  if (base.size() > suffix.size() && base.compare(base.size() - suffix.size(), suffix.size(), suffix) == 0) {
+    base.resize(base.size() - suffix.size());
+    options.algorithm = base;
+    if (polish_evaluations == 0) polish_evaluations = budget / 5;
   }
-  if (algorithm == "ga:gaussian-elitist") {
+  if (base == "tbpso:paper" || base == "tbpso:toward") {
+    options.algorithm = "tbpso";
+    options.trust_direction = base.substr(6);
+  }
+  if (base == "ga:gaussian-elitist") {
     options.algorithm = "ga";
     options.ga_mutation = GaMutation::gaussian;
     options.elitism = 1;
@@ -158,7 +167,8 @@ int main(int argc, char** argv) {
   const std::vector<std::string> algorithms = {
       "pso", "tbpso:toward", "tbpso:paper", "ga", "ga:gaussian-elitist",
       "nlopt:GN_DIRECT_L", "nlopt:GN_CRS2_LM", "nlopt:GN_ISRES", "nlopt:GN_ESCH",
-      "nlopt:LN_BOBYQA", "nlopt:LN_NELDERMEAD", "nlopt:LN_SBPLX", "pagmo:pso", "pagmo:sga"};
+      "nlopt:LN_BOBYQA", "nlopt:LN_NELDERMEAD", "nlopt:LN_SBPLX", "pagmo:pso", "pagmo:sga",
+      "pso+polish", "tbpso:paper+polish", "tbpso:toward+polish", "ga+polish"};
   const auto& functions = test_function_names();
   // medians[dim][budget][function][algorithm]
   std::map<int, std::map<long, std::map<std::string, std::map<std::string, double>>>> medians;
