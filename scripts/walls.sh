@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Calibration against the Lourenço 2005 wall tests (data/walls/, docs/walls.md):
-#   1. the boundary-condition trial on SW.30.1 (top beam held level / free to rotate);
+#   1. the trials on SW.30.1: top beam held level / free to rotate; 9 / 10 courses;
 #   2. one campaign per wall test (kn, ks, friction; TBPSO 10 x 10, objective 1);
 #   3. the worth test: SW.30.1 + SW.100.1 calibrated together, then SW.200.1 and SW.250.1 predicted;
 #   4. the fidelity check of the fast run settings: the calibrated SW.30.1 and SW.250.1 runs repeated
@@ -31,6 +31,7 @@ calibrate() {
 if has_step trial; then
   calibrate SW.30.1
   calibrate SW.30.1-beam-rotation
+  calibrate SW.30.1-10-courses
 fi
 
 if has_step walls; then
@@ -87,6 +88,44 @@ def case_cells(c):
 
 def row(cells): return "| " + " | ".join(cells) + " |"
 
+def numeric_rows(path, encoding="latin-1"):
+    rows = []
+    for line in open(path, encoding=encoding):
+        try: rows.append([float(v) for v in line.strip().split(",")])
+        except ValueError: continue
+    return rows
+
+def envelope(xs, fs):
+    # The objective's loading envelope: keep a point only where x exceeds every earlier x; a point at
+    # the same x replaces the last kept one.
+    ex, ef = [], []
+    for x, f in zip(xs, fs):
+        if ex and x == ex[-1]: ef[-1] = f
+        elif not ex or x > ex[-1]: ex.append(x); ef.append(f)
+    return ex, ef
+
+def interp(ex, ef, x):
+    import bisect
+    i = min(max(bisect.bisect_left(ex, x), 1), len(ex) - 1)
+    t = (x - ex[i - 1]) / (ex[i] - ex[i - 1])
+    return ef[i - 1] + t * (ef[i] - ef[i - 1])
+
+def residual_split(measured_csv, simulated_csv):
+    """Mean signed residual (simulated - measured, N) before and after the measured peak, over the
+    objective's 200 points of the shared window (measured file in mm/kN, simulated in m/N)."""
+    m = numeric_rows(measured_csv)
+    mx, mf = envelope([r[0] * 1e-3 for r in m], [r[1] * 1e3 for r in m])
+    s = numeric_rows(simulated_csv, "utf-8")
+    sx, sf = envelope([r[2] for r in s], [r[1] for r in s])
+    lo, hi = max(mx[0], sx[0]), min(mx[-1], sx[-1])
+    peak_at = max(zip(mf, mx))[1]
+    before, after = [], []
+    for k in range(200):
+        x = lo + (hi - lo) * k / 199
+        (before if x <= peak_at else after).append(interp(sx, sf, x) - interp(mx, mf, x))
+    mean = lambda v: sum(v) / len(v) if v else float("nan")
+    return mean(before), mean(after)
+
 tables = {}
 walls = ["SW.30.1", "SW.30.2", "SW.100.1", "SW.100.2", "SW.200.1", "SW.200.2", "SW.250.1"]
 stress = {"SW.30": 0.15, "SW.100": 0.50, "SW.200": 1.00, "SW.250": 1.25}
@@ -100,26 +139,32 @@ for w in walls:
                      + case_cells(f["cases"][0]) + [str(r["simulations"]), f"{r['wall_time_s']:.0f}"]))
 tables["per-wall"] = lines
 
-head = ["top beam", "kn (GPa/m)", "ks (GPa/m)", "φ (°)", "objective 1 (kN)", "peak measured (kN)",
+head = ["model of SW.30.1", "kn (GPa/m)", "ks (GPa/m)", "φ (°)", "objective 1 (kN)", "peak measured (kN)",
         "peak calibrated (kN)", "peak error", "RMS error (kN)", "RMS / peak"]
 lines = [row(head), row(["---"] * len(head))]
-for label, name in [("held level (rotation fixed)", "SW.30.1"), ("free to rotate", "SW.30.1-beam-rotation")]:
+for label, name in [("9 courses, top beam held level", "SW.30.1"), ("9 courses, top beam free to rotate", "SW.30.1-beam-rotation"),
+                    ("10 courses (load at the wall top), beam held level", "SW.30.1-10-courses")]:
     r, f = load(f"{out}/{name}/result.json"), load(f"{out}/{name}/fit/prediction.json")
     if not r or not f: lines.append(row([label, "not run"] + [""] * (len(head) - 2))); continue
     lines.append(row([label] + param_cells(r) + [kN(r["best"]["fitness"])] + case_cells(f["cases"][0])))
 tables["boundary"] = lines
 
 head = ["test", "role", "peak measured (kN)", "peak simulated (kN)", "peak error", "RMS error (kN)", "RMS / peak",
-        "RMS of its own calibration (kN)"]
+        "RMS of its own calibration (kN)", "peak at, measured / simulated (mm)",
+        "mean residual before / after the measured peak (kN)"]
+codes = {"SW.30.1": "SW301", "SW.100.1": "SW1001", "SW.200.1": "SW2001", "SW.250.1": "SW2501"}
 lines = [row(head), row(["---"] * len(head))]
 r = load(f"{out}/worth-SW30-SW100/result.json")
 fit, pred = load(f"{out}/worth-SW30-SW100/fit/prediction.json"), load(f"{out}/worth-SW30-SW100/predict/prediction.json")
 if r and fit and pred:
-    for role, doc_cases in [("calibrated on", fit["cases"]), ("predicted", pred["cases"])]:
+    for role, doc_cases, folder in [("calibrated on", fit["cases"], "fit"), ("predicted", pred["cases"], "predict")]:
         for c in doc_cases:
+            before, after = residual_split(f"data/walls/FD_{codes[c['name']]}_Lourenco2005.csv",
+                                           f"{out}/worth-SW30-SW100/{folder}/{c['name']}.csv")
             own = load(f"{out}/{c['name']}/fit/prediction.json")
             own_rms = f"{own['cases'][0]['rms_error'] / 1e3:.2f}" if own and own["cases"][0]["rms_error"] is not None else "–"
-            lines.append(row([c["name"], role] + case_cells(c) + [own_rms]))
+            lines.append(row([c["name"], role] + case_cells(c) + [own_rms, f"{c['measured_peak_displacement'] * 1e3:.1f} / {c['simulated_peak_displacement'] * 1e3:.1f}",
+                                                            f"{before / 1e3:+.1f} / {after / 1e3:+.1f}"]))
     p = r["best"]["params"]
     lines.append("")
     lines.append(f"Joint set calibrated on SW.30.1 + SW.100.1: kn = {p['kn'] / 1e9:.3g} GPa/m, "

@@ -7,6 +7,8 @@
 //   bench_optimise_pagmo [--seeds N] [--quick]     (--quick: 5 seeds, 3-D only)
 //   bench_optimise_pagmo [--seeds N] --sphere-2000  (Sphere 3-D, 2000 evaluations, with and without
 //                                                    a 200-evaluation LN_BOBYQA polish)
+//   bench_optimise_pagmo [--seeds N] --tbpso-long   (TBPSO at 2000 evaluations: readings, clamps,
+//                                                    bound handling, trust size, pinned particles)
 #include <demcal/optimise/optimise.hpp>
 
 #include <pagmo/algorithms/pso.hpp>
@@ -15,6 +17,7 @@
 #include <pagmo/problem.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -151,6 +154,55 @@ void sphere_2000(int seeds, long polish_evaluations) {
   }
 }
 
+// TBPSO on Sphere 3-D at 2000 evaluations (no polish), by reading of Δx, velocity clamp and bound
+// handling: seeds reaching < 1e-6, median, worst, the largest |C_ij| at the end, and how many of
+// the 10 particles end pinned (a coordinate on a bound with zero velocity), from save_state().
+void tbpso_long(int seeds) {
+  const TestFunction f = make_test_function("sphere", 3);
+  std::printf("### TBPSO, Sphere 3-D, 2000 evaluations, %d seeds\n\n", seeds);
+  std::printf("| reading | max_velocity | bounds | seeds < 1e-6 | median | worst | max abs(C) at the end (median) | "
+              "particles pinned at a bound at the end (mean of 10) |\n|---|---|---|---|---|---|---|---|\n");
+  for (const char* reading : {"paper", "toward"})
+    for (double vmax : {0.5, 0.2, 0.1})
+      for (auto bounds : {BoundHandling::clamp, BoundHandling::reflect}) {
+        std::vector<double> best, max_trust;
+        int reached = 0;
+        double pinned = 0.0;
+        for (int seed = 1; seed <= seeds; ++seed) {
+          ParameterSpace space;
+          for (int k = 0; k < f.dimension; ++k) space.add(std::string("x").append(std::to_string(k)), f.lower[k], f.upper[k]);
+          OptimiserOptions options;
+          options.algorithm = "tbpso";
+          options.trust_direction = reading;
+          options.max_evaluations = 2000;
+          options.seed = static_cast<std::uint64_t>(seed);
+          options.max_velocity = vmax;
+          options.bounds = bounds;
+          auto optimiser = make_optimiser(space, options);
+          const auto summary = minimise(*optimiser, f.evaluate);
+          best.push_back(summary.best_value);
+          reached += summary.best_value < 1e-6;
+          const auto state = optimiser->save_state();
+          double largest = 0.0;
+          for (const auto& row : state["trust"])
+            for (const auto& c : row) largest = std::max(largest, std::abs(c.get<double>()));
+          max_trust.push_back(largest);
+          for (std::size_t i = 0; i < state["x"].size(); ++i) {
+            bool at_bound = false;
+            for (std::size_t k = 0; k < state["x"][i].size(); ++k) {
+              const double x = state["x"][i][k].get<double>(), v = state["v"][i][k].get<double>();
+              at_bound = at_bound || ((x == 0.0 || x == 1.0) && v == 0.0);
+            }
+            pinned += at_bound;
+          }
+        }
+        std::printf("| %s | %.1f | %s | %d / %d | %.3g | %.3g | %.0f | %.1f |\n", reading, vmax, to_string(bounds).c_str(),
+                    reached, seeds, quartiles(best).median, *std::max_element(best.begin(), best.end()),
+                    quartiles(max_trust).median, pinned / seeds);
+        std::fflush(stdout);
+      }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -159,6 +211,10 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--seeds") && i + 1 < argc) seeds = std::atoi(argv[++i]);
     if (!std::strcmp(argv[i], "--quick")) seeds = 5, dimensions = {3};
+    if (!std::strcmp(argv[i], "--tbpso-long")) {
+      tbpso_long(seeds);
+      return 0;
+    }
     if (!std::strcmp(argv[i], "--sphere-2000")) {
       sphere_2000(seeds, 200);
       return 0;

@@ -9,9 +9,22 @@
 #include <cmath>
 #include <cstdint>
 #include <random>
+#include <sstream>
+#include <stdexcept>
 #include <string>
 
 namespace demcal::optimise::detail {
+
+// A value with every digit, for messages that name it.
+inline std::string fmt(double value) {
+  std::ostringstream out;
+  out.precision(17);
+  out << value;
+  return out.str();
+}
+
+// Bad options or states are std::invalid_argument with the message naming the key and value.
+[[noreturn]] inline void fail(const std::string& message) { throw std::invalid_argument(message); }
 
 // Uniform in [0, 1) from the top 53 bits: identical on every standard library.
 inline double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }

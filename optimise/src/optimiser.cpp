@@ -10,18 +10,8 @@
 
 namespace demcal::optimise {
 
-namespace {
-
-std::string fmt(double value) {
-  std::ostringstream out;
-  out.precision(17);
-  out << value;
-  return out.str();
-}
-
-[[noreturn]] void fail(const std::string& message) { throw std::invalid_argument(message); }
-
-}  // namespace
+using detail::fail;
+using detail::fmt;
 
 // ---- enums ----------------------------------------------------------------------------------
 

@@ -1,4 +1,5 @@
 #include "demcal/optimise/parameter_space.hpp"
+#include "internal.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -9,18 +10,8 @@
 
 namespace demcal::optimise {
 
-namespace {
-
-std::string fmt(double value) {
-  std::ostringstream out;
-  out.precision(17);
-  out << value;
-  return out.str();
-}
-
-[[noreturn]] void fail(const std::string& message) { throw std::invalid_argument(message); }
-
-}  // namespace
+using detail::fail;
+using detail::fmt;
 
 std::string to_string(ParameterSpec::Scale scale) {
   return scale == ParameterSpec::Scale::log10 ? "log10" : "linear";

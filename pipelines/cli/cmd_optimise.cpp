@@ -39,6 +39,9 @@ nlohmann::json vector_json(const Eigen::VectorXd& v) {
 void run(const OptimiseCommandOptions& o) {
   using namespace demcal::optimise;
   if (o.evaluations <= 0) throw std::runtime_error("--evals " + std::to_string(o.evaluations) + " must be > 0");
+  if (o.polish_evaluations < 0 || (o.polish_evaluations > 0 && o.polish_evaluations >= o.evaluations))
+    throw std::runtime_error("--polish " + std::to_string(o.polish_evaluations) + " must lie in [0, --evals " +
+                             std::to_string(o.evaluations) + "): the polish takes its evaluations out of --evals");
   const TestFunction function = make_test_function(o.function, o.dimension, !o.unshifted);
   ParameterSpace space;
   for (int k = 0; k < o.dimension; ++k) space.add(std::string("x").append(std::to_string(k)), function.lower[k], function.upper[k]);

@@ -86,21 +86,6 @@ nlohmann::json params_to_json(const std::map<std::string, double>& params) {
   return j;
 }
 
-// Parameters travel as their exact key text next to the readable JSON, so they read back
-// bit-identical whatever the JSON printer does with the digits.
-std::map<std::string, double> params_from_key(const std::string& key) {
-  std::map<std::string, double> params;
-  size_t start = 0;
-  while (start < key.size()) {
-    size_t end = key.find(';', start);
-    if (end == std::string::npos) end = key.size();
-    const std::string item = key.substr(start, end - start);
-    const size_t eq = item.find('=');
-    if (eq != std::string::npos) params[item.substr(0, eq)] = std::strtod(item.c_str() + eq + 1, nullptr);
-    start = end + 1;
-  }
-  return params;
-}
 
 std::vector<std::string> json_strings(const std::string& text) {
   std::vector<std::string> out;
@@ -120,6 +105,22 @@ std::string parameter_key(const std::map<std::string, double>& params) {
     key += name + "=" + buffer;
   }
   return key;
+}
+
+// Parameters travel as their exact key text next to the readable JSON, so they read back
+// bit-identical whatever the JSON printer does with the digits.
+std::map<std::string, double> params_from_key(const std::string& key) {
+  std::map<std::string, double> params;
+  size_t start = 0;
+  while (start < key.size()) {
+    size_t end = key.find(';', start);
+    if (end == std::string::npos) end = key.size();
+    const std::string item = key.substr(start, end - start);
+    const size_t eq = item.find('=');
+    if (eq != std::string::npos) params[item.substr(0, eq)] = std::strtod(item.c_str() + eq + 1, nullptr);
+    start = end + 1;
+  }
+  return params;
 }
 
 std::string hash_text(const std::string& text) {

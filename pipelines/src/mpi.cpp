@@ -35,21 +35,6 @@ std::string receive_bytes(int from, int tag, MPI_Status* status_out = nullptr) {
   return bytes;
 }
 
-// Parameters cross ranks as their exact key (hex floats), so they arrive bit-identical.
-std::map<std::string, double> params_from_key(const std::string& key) {
-  std::map<std::string, double> params;
-  size_t start = 0;
-  while (start < key.size()) {
-    size_t end = key.find(';', start);
-    if (end == std::string::npos) end = key.size();
-    const std::string item = key.substr(start, end - start);
-    const size_t eq = item.find('=');
-    if (eq != std::string::npos) params[item.substr(0, eq)] = std::strtod(item.c_str() + eq + 1, nullptr);
-    start = end + 1;
-  }
-  return params;
-}
-
 class MpiBackend : public EvaluationBackend {
  public:
   explicit MpiBackend(std::vector<dem::Scene> scenes) : local_(std::move(scenes), 0) {

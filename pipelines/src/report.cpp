@@ -136,7 +136,8 @@ Figure fit_figure(const ReportInputs& in, size_t k, const std::string& channel, 
     script += datablock("simulated_smooth", ss);
     plot += ", $simulated_smooth using 1:2 with lines lw 2 dt 2 lc rgb '#d62728' title 'simulation, smoothed'";
   }
-  script += "set xlabel '" + channel + " (mm)'\nset ylabel 'force (kN)'\nset grid\nset key bottom right\n" + plot + "\n";
+  script += "set xlabel '" + channel + " (mm)'\nset ylabel 'force (kN)'\nset grid\nset key bottom right\n"
+            "set autoscale xfix\nset offsets graph 0.02, graph 0.02, 0, 0\n" + plot + "\n";
   f.error = run_gnuplot(script, (fs::path(out_dir) / f.file).string());
   return f;
 }
@@ -157,6 +158,20 @@ Figure convergence_figure(const ReportInputs& in, const std::string& out_dir) {
                              "$best using 1:2 with steps lw 2 lc rgb '#1f77b4' title 'best so far'\n";
   f.error = run_gnuplot(script, (fs::path(out_dir) / f.file).string());
   return f;
+}
+
+// Tick marks of a logarithmic colour bar over the fitness values (third column): 1, 2, 5 x 10^n
+// inside the range, so that a range of less than a decade still gets labelled ticks.
+std::string colour_bar_tics(const std::vector<std::vector<double>>& rows) {
+  double lo = INFINITY, hi = 0;
+  for (const auto& r : rows)
+    if (r.size() > 2 && r[2] > 0) lo = std::min(lo, r[2]), hi = std::max(hi, r[2]);
+  if (!(hi > lo)) return "";
+  std::string tics;
+  for (double decade = std::pow(10.0, std::floor(std::log10(lo))); decade <= hi; decade *= 10)
+    for (double m : {1.0, 2.0, 5.0})
+      if (m * decade >= lo && m * decade <= hi) tics += (tics.empty() ? "" : ", ") + fmt(m * decade, "%g");
+  return tics.empty() ? "" : "set cbtics (" + tics + ")\n";
 }
 
 std::vector<Figure> parameter_space_figures(const ReportInputs& in, const std::string& out_dir) {
@@ -187,6 +202,7 @@ std::vector<Figure> parameter_space_figures(const ReportInputs& in, const std::s
       script += "set yrange [" + fmt(scaled(free[b].name, free[b].lower)) + ":" + fmt(scaled(free[b].name, free[b].upper)) + "]\n";
       if (free[a].scale == optimise::ParameterSpec::Scale::log10) script += "set logscale x\n";
       if (free[b].scale == optimise::ParameterSpec::Scale::log10) script += "set logscale y\n";
+      script += colour_bar_tics(all);
       script += "set logscale cb\nset cblabel 'fitness'\nset palette rgb 33,13,10\nset grid\n"
                 "plot $all using 1:2:3 with points pt 7 ps 0.6 lc palette title 'evaluated', "
                 "$top using 1:2 with points pt 6 ps 2.5 lw 2 lc rgb '#d62728' title 'five best', "

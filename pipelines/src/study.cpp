@@ -3,11 +3,14 @@
 #include "demcal/pipelines/report.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
+#include <set>
 #include <sstream>
 
 namespace demcal::pipelines {
@@ -15,12 +18,181 @@ namespace demcal::pipelines {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
+namespace {
+
+std::string method_label(const StudyMethod& m, int iterations) {
+  return m.label.empty() ? m.algorithm + "-" + std::to_string(iterations) : m.label;
+}
+
+// A folder name from a label ("nlopt:GN_ISRES-20" -> "nlopt_GN_ISRES-20").
+std::string folder_name(std::string label) {
+  for (char& c : label)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.')) c = '_';
+  return label;
+}
+
+bool is_stiffness(const std::string& name) {
+  return name == "kn" || name == "ks" || name.ends_with(".kn") || name.ends_with(".ks");
+}
+
+// Column header and display value of a parameter (stiffness in GPa/m, friction in degrees).
+std::string header_of(const std::string& name) {
+  if (is_stiffness(name)) return name + " (GPa/m)";
+  if (name == "friction_deg" || name.ends_with(".friction_deg")) return name + " (deg)";
+  return name;
+}
+double display_value(const std::string& name, double v) { return is_stiffness(name) ? v / 1e9 : v; }
+
+std::string format(const char* pattern, double v) {
+  if (!std::isfinite(v)) return "-";
+  char b[64];
+  std::snprintf(b, sizeof b, pattern, v);
+  return b;
+}
+
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+json statistics_json(const FitnessStatistics& s) {
+  return {{"count", s.count}, {"mean", s.mean}, {"stddev", s.stddev}, {"median", s.median}, {"min", s.min}, {"max", s.max}};
+}
+
+// Best fitness after `simulations` simulations of a campaign (NaN when it has no finite value yet).
+double best_after(const StudyCampaign& c, long simulations, size_t cases) {
+  if (c.best_history.empty() || simulations <= 0) return NAN;
+  const size_t candidates = static_cast<size_t>(simulations) / std::max<size_t>(1, cases);
+  if (candidates == 0) return NAN;
+  return c.best_history[std::min(candidates, c.best_history.size()) - 1];
+}
+
+}  // namespace
+
+FitnessStatistics fitness_statistics(std::vector<double> values) {
+  values.erase(std::remove_if(values.begin(), values.end(), [](double v) { return !std::isfinite(v); }), values.end());
+  FitnessStatistics s;
+  s.count = static_cast<long>(values.size());
+  if (values.empty()) return s;
+  std::sort(values.begin(), values.end());
+  double sum = 0;
+  for (double v : values) sum += v;
+  s.mean = sum / values.size();
+  double sq = 0;
+  for (double v : values) sq += (v - s.mean) * (v - s.mean);
+  s.stddev = values.size() > 1 ? std::sqrt(sq / (values.size() - 1)) : 0;
+  s.min = values.front();
+  s.max = values.back();
+  const size_t n = values.size();
+  s.median = n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
+  return s;
+}
+
 void StudyConfig::Validate() const {
   campaign.Validate();
-  if (methods.empty()) throw CampaignError("study: no algorithms");
-  if (seeds.empty()) throw CampaignError("study: no seeds");
-  for (const auto& m : methods)
-    if (m.iterations < 0) throw CampaignError("study: iterations of " + m.algorithm + " must be > 0");
+  if (methods.empty()) throw CampaignError(source + ": no algorithms");
+  if (seeds.empty()) throw CampaignError(source + ": no seeds");
+  std::set<std::uint64_t> seen_seeds;
+  for (const auto seed : seeds)
+    if (!seen_seeds.insert(seed).second) throw CampaignError(source + ": seed " + std::to_string(seed) + " is listed twice");
+  std::set<std::string> labels;
+  for (size_t i = 0; i < methods.size(); ++i) {
+    const auto& m = methods[i];
+    const std::string where = source + ": algorithms[" + std::to_string(i) + "] ('" + m.algorithm + "')";
+    if (m.iterations < 0)
+      throw CampaignError(where + ": iterations = " + std::to_string(m.iterations) + " must be >= 1 (or 0 = the campaign's)");
+    optimise::OptimiserOptions o = campaign.optimiser;
+    o.algorithm = m.algorithm;
+    if (m.iterations > 0) o.iterations = m.iterations;
+    try {
+      o.Validate();
+    } catch (const std::exception& e) {
+      throw CampaignError(where + ": " + e.what());
+    }
+    const std::string label = method_label(m, o.iterations);
+    if (!labels.insert(label).second)
+      throw CampaignError(where + ": label '" + label + "' is used twice (give the methods distinct labels)");
+  }
+}
+
+StudyConfig study_from_json(const json& j, const std::string& base, const std::string& path) {
+  if (!j.is_object()) throw CampaignError(path + ": a study must be a JSON object");
+  for (const auto& [key, value] : j.items())
+    if (key != "campaign" && key != "algorithms" && key != "iterations" && key != "seeds" && key != "output" &&
+        key != "description")
+      throw CampaignError(path + ": unknown key '" + key +
+                          "' (known: campaign, algorithms, iterations, seeds, output, description)");
+  StudyConfig s;
+  if (!j.contains("campaign")) throw CampaignError(path + ": missing 'campaign'");
+  if (j["campaign"].is_string()) {
+    const fs::path file = fs::path(base) / j["campaign"].get<std::string>();
+    s.campaign = load_campaign(file.string());
+  } else if (j["campaign"].is_object()) {
+    s.campaign = campaign_from_json(j["campaign"], base, path + ": campaign");
+  } else {
+    throw CampaignError(path + ": 'campaign' must be a file name or a campaign object, not " + j["campaign"].dump());
+  }
+  if (j.contains("iterations") && !j["iterations"].is_object())
+    throw CampaignError(path + ": 'iterations' must be an object {algorithm: iterations}, not " + j["iterations"].dump());
+  auto integer = [&](const json& v, const std::string& key) {
+    if (!v.is_number_integer()) throw CampaignError(path + ": " + key + " must be an integer, not " + v.dump());
+    return v.get<long long>();
+  };
+  if (!j.contains("algorithms") || !j["algorithms"].is_array() || j["algorithms"].empty())
+    throw CampaignError(path + ": 'algorithms' must be a non-empty array of names or {algorithm, iterations, label}");
+  for (size_t i = 0; i < j["algorithms"].size(); ++i) {
+    const json& a = j["algorithms"][i];
+    const std::string key = "algorithms[" + std::to_string(i) + "]";
+    StudyMethod m;
+    if (a.is_string()) {
+      m.algorithm = a.get<std::string>();
+      if (j.contains("iterations") && j["iterations"].contains(m.algorithm))
+        m.iterations = static_cast<int>(integer(j["iterations"][m.algorithm], "iterations." + m.algorithm));
+    } else if (a.is_object()) {
+      for (const auto& [k, v] : a.items())
+        if (k != "algorithm" && k != "iterations" && k != "label")
+          throw CampaignError(path + ": " + key + ": unknown key '" + k + "' (known: algorithm, iterations, label)");
+      if (!a.contains("algorithm") || !a["algorithm"].is_string())
+        throw CampaignError(path + ": " + key + ": 'algorithm' (a name) is missing");
+      m.algorithm = a["algorithm"].get<std::string>();
+      if (a.contains("iterations")) m.iterations = static_cast<int>(integer(a["iterations"], key + ".iterations"));
+      else if (j.contains("iterations") && j["iterations"].contains(m.algorithm))
+        m.iterations = static_cast<int>(integer(j["iterations"][m.algorithm], "iterations." + m.algorithm));
+      if (a.contains("label")) {
+        if (!a["label"].is_string() || a["label"].get<std::string>().empty())
+          throw CampaignError(path + ": " + key + ".label must be a non-empty string, not " + a["label"].dump());
+        m.label = a["label"].get<std::string>();
+      }
+    } else {
+      throw CampaignError(path + ": " + key + " must be a name or an object, not " + a.dump());
+    }
+    s.methods.push_back(m);
+  }
+  if (j.contains("seeds")) {
+    const json& seeds = j["seeds"];
+    auto seed_value = [&](const json& v, const std::string& key) {
+      if (!v.is_number_integer() || v.get<long long>() < 0)
+        throw CampaignError(path + ": " + key + " must be a non-negative integer, not " + v.dump());
+      return v.get<std::uint64_t>();
+    };
+    if (seeds.is_array()) {
+      for (size_t i = 0; i < seeds.size(); ++i) s.seeds.push_back(seed_value(seeds[i], "seeds[" + std::to_string(i) + "]"));
+    } else if (seeds.is_object()) {
+      for (const auto& [k, v] : seeds.items())
+        if (k != "first" && k != "count") throw CampaignError(path + ": seeds: unknown key '" + k + "' (known: first, count)");
+      const std::uint64_t first = seeds.contains("first") ? seed_value(seeds["first"], "seeds.first") : 1;
+      const std::uint64_t count = seeds.contains("count") ? seed_value(seeds["count"], "seeds.count") : 10;
+      if (count < 1) throw CampaignError(path + ": seeds.count = 0 must be >= 1");
+      for (std::uint64_t i = 0; i < count; ++i) s.seeds.push_back(first + i);
+    } else {
+      throw CampaignError(path + ": 'seeds' must be an array or {first, count}, not " + seeds.dump());
+    }
+  } else {
+    for (std::uint64_t i = 1; i <= 10; ++i) s.seeds.push_back(i);
+  }
+  if (j.contains("output") && !j["output"].is_string())
+    throw CampaignError(path + ": 'output' must be a folder name, not " + j["output"].dump());
+  s.output = (fs::path(base) / j.value("output", std::string("study"))).lexically_normal().string();
+  s.source = path;
+  s.Validate();
+  return s;
 }
 
 StudyConfig load_study(const std::string& path) {
@@ -32,165 +204,247 @@ StudyConfig load_study(const std::string& path) {
   } catch (const std::exception& e) {
     throw CampaignError(path + ": not valid JSON: " + e.what());
   }
-  const std::string base = fs::path(path).parent_path().string();
-  StudyConfig s;
-  for (const auto& [key, value] : j.items())
-    if (key != "campaign" && key != "algorithms" && key != "iterations" && key != "seeds" && key != "output")
-      throw CampaignError(path + ": unknown key '" + key + "' (known: campaign, algorithms, iterations, seeds, output)");
-  if (!j.contains("campaign")) throw CampaignError(path + ": missing 'campaign'");
-  if (j["campaign"].is_string()) {
-    const fs::path file = fs::path(base) / j["campaign"].get<std::string>();
-    s.campaign = load_campaign(file.string());
-  } else {
-    s.campaign = campaign_from_json(j["campaign"], base, path + ": campaign");
-  }
-  if (!j.contains("algorithms") || !j["algorithms"].is_array())
-    throw CampaignError(path + ": 'algorithms' must be an array of names");
-  for (const auto& a : j["algorithms"]) {
-    StudyMethod m;
-    m.algorithm = a.get<std::string>();
-    if (j.contains("iterations") && j["iterations"].contains(m.algorithm)) m.iterations = j["iterations"][m.algorithm].get<int>();
-    s.methods.push_back(m);
-  }
-  if (j.contains("seeds")) {
-    if (j["seeds"].is_array()) {
-      for (const auto& seed : j["seeds"]) s.seeds.push_back(seed.get<std::uint64_t>());
-    } else {
-      const auto first = j["seeds"].value("first", 1ull);
-      const auto count = j["seeds"].value("count", 10ull);
-      for (std::uint64_t i = 0; i < count; ++i) s.seeds.push_back(first + i);
-    }
-  } else {
-    for (std::uint64_t i = 1; i <= 10; ++i) s.seeds.push_back(i);
-  }
-  s.output = (fs::path(base) / j.value("output", std::string("study"))).lexically_normal().string();
-  return s;
+  return study_from_json(j, fs::path(path).parent_path().string(), path);
 }
+
+namespace {
+
+void write_markdown(const StudyConfig& config, const StudyResult& result) {
+  const auto& free = config.campaign.space.free_parameters();
+  const size_t cases = config.campaign.cases.size();
+  std::ostringstream md;
+  md << "# Study: " << config.campaign.name << "\n\n"
+     << config.methods.size() << " methods x " << config.seeds.size() << " seeds (";
+  for (size_t i = 0; i < config.seeds.size(); ++i) md << (i ? ", " : "") << config.seeds[i];
+  md << "), objective " << config.campaign.objective << ", population " << config.campaign.optimiser.population
+     << ", " << cases << " case(s) per candidate. Every campaign's result is in `<method>/seed-<seed>/result.json`.\n";
+
+  // The paper's Tables 1-4: per method, the five best of the per-seed best sets.
+  md << "\n## Five best solution sets per method\n\nThe best set of each seed's campaign; the five best of them per "
+        "method (Run ID = rank).\n\n| Calibration process | Number of iterations | Run ID |";
+  for (const auto& p : free) md << " " << header_of(p.name) << " |";
+  md << " Fitness (-) | seed | found at simulation |\n|---|---|---|";
+  for (size_t i = 0; i < free.size(); ++i) md << "---|";
+  md << "---|---|---|\n";
+  for (const auto& r : result.methods)
+    for (size_t rank = 0; rank < r.five_best.size(); ++rank) {
+      const StudyCampaign& c = r.campaigns[r.five_best[rank]];
+      md << "| " << (rank == 0 ? r.method.label : "") << " | " << (rank == 0 ? std::to_string(r.method.iterations) : "")
+         << " | " << rank + 1 << " |";
+      for (const auto& p : free)
+        md << " " << (c.best.params.count(p.name) ? format(is_stiffness(p.name) ? "%.3g" : "%.2f", display_value(p.name, c.best.params.at(p.name))) : "-")
+           << " |";
+      const auto hit = std::find(c.best_history.begin(), c.best_history.end(), c.best.fitness);
+      const long found = static_cast<long>(hit - c.best_history.begin()) + 1;
+      md << " " << format("%.1f", c.best.fitness) << " | " << c.seed << " | "
+         << (std::isfinite(c.best.fitness) ? std::to_string(found * static_cast<long>(cases)) : "-") << " |\n";
+    }
+
+  md << "\n## Fitness of the best set per seed\n\n| method | iterations | seeds with a result | mean | std | median | min | max |\n"
+     << "|---|---|---|---|---|---|---|---|\n";
+  for (const auto& r : result.methods) {
+    const auto& s = r.fitness;
+    md << "| " << r.method.label << " | " << r.method.iterations << " | " << s.count << "/" << r.campaigns.size() << " | "
+       << format("%.1f", s.mean) << " | " << format("%.1f", s.stddev) << " | " << format("%.1f", s.median) << " | "
+       << format("%.1f", s.min) << " | " << format("%.1f", s.max) << " |\n";
+  }
+  md << "\n## At equal cost: best fitness after " << result.common_budget
+     << " simulations\n\nThe per-seed best after the fewest simulations any method used, so that methods with "
+        "larger budgets are compared at the same cost.\n\n| method | mean | std | median | min | max |\n|---|---|---|---|---|---|\n";
+  for (const auto& r : result.methods) {
+    const auto& s = r.fitness_at_common_budget;
+    md << "| " << r.method.label << " | " << format("%.1f", s.mean) << " | " << format("%.1f", s.stddev) << " | "
+       << format("%.1f", s.median) << " | " << format("%.1f", s.min) << " | " << format("%.1f", s.max) << " |\n";
+  }
+  md << "\n## Simulations used\n\n| method | per campaign | all seeds | simulated in this session (rest read from the "
+        "archive) | wall time this session (s) |\n|---|---|---|---|---|\n";
+  for (const auto& r : result.methods) {
+    long simulated = 0;
+    for (const auto& c : r.campaigns) simulated += c.simulated;
+    md << "| " << r.method.label << " | " << r.simulations_per_campaign << " | " << r.simulations_total << " | "
+       << simulated << " | " << format("%.1f", r.wall_time_s) << " |\n";
+  }
+  bool any_failed = false;
+  for (const auto& r : result.methods)
+    for (const auto& c : r.campaigns)
+      if (c.status != CampaignStatus::completed) {
+        if (!any_failed) md << "\n## Failed campaigns\n\n";
+        any_failed = true;
+        md << "- " << r.method.label << " seed " << c.seed << ": " << c.message << "\n";
+      }
+
+  // Figures: mean best-so-far against simulations; the per-seed best sets in parameter space.
+  fs::create_directories(fs::path(config.output) / "figures");
+  std::string script, plot;
+  bool positive = true;
+  for (size_t m = 0; m < result.methods.size(); ++m) {
+    const auto& r = result.methods[m];
+    size_t n = 0;
+    for (const auto& c : r.campaigns) n = std::max(n, c.best_history.size());
+    script += "$c" + std::to_string(m) + " << EOD\n";
+    for (size_t i = 0; i < n; ++i) {
+      double sum = 0;
+      int count = 0;
+      for (const auto& c : r.campaigns)
+        if (i < c.best_history.size() && std::isfinite(c.best_history[i])) sum += c.best_history[i], ++count;
+      if (count == 0) continue;
+      if (sum <= 0) positive = false;
+      script += std::to_string((i + 1) * cases) + " " + format("%.10g", sum / count) + "\n";
+    }
+    script += "EOD\n";
+    plot += std::string(m ? ", " : "") + "$c" + std::to_string(m) + " using 1:2 with lines lw 2 title '" + r.method.label + "'";
+  }
+  script += "set xlabel 'simulations'\nset ylabel 'best fitness, mean over seeds'\nset grid\nset key top right\n";
+  if (positive) script += "set logscale y\n";
+  const std::string convergence_error =
+      run_gnuplot(script + "plot " + plot + "\n", (fs::path(config.output) / "figures" / "convergence.png").string());
+  md << "\n## Convergence\n\n"
+     << (convergence_error.empty() ? "![mean best fitness against simulations](figures/convergence.png)\n"
+                                   : "*Figure not drawn: " + convergence_error + "*\n");
+
+  md << "\n## Calibrated sets in parameter space\n\nThe best set of every seed, one symbol per method (the paper's "
+        "Figures 14, 17, 20, 23).\n\n";
+  static const char* colours[] = {"#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf", "#7f7f7f"};
+  for (size_t a = 0; a < free.size(); ++a)
+    for (size_t b = a + 1; b < free.size(); ++b) {
+      std::string s, p;
+      for (size_t m = 0; m < result.methods.size(); ++m) {
+        s += "$m" + std::to_string(m) + " << EOD\n";
+        for (const auto& c : result.methods[m].campaigns)
+          if (std::isfinite(c.best.fitness))
+            s += format("%.10g", display_value(free[a].name, c.best.params.at(free[a].name))) + " " +
+                 format("%.10g", display_value(free[b].name, c.best.params.at(free[b].name))) + "\n";
+        s += "EOD\n";
+        p += std::string(m ? ", " : "") + "$m" + std::to_string(m) + " using 1:2 with points pt " + std::to_string(5 + 2 * (m % 4)) +
+             " ps 1.6 lc rgb '" + colours[m % 8] + "' title '" + result.methods[m].method.label + "'";
+      }
+      s += "set xlabel '" + header_of(free[a].name) + "'\nset ylabel '" + header_of(free[b].name) + "'\n";
+      s += "set xrange [" + format("%.10g", display_value(free[a].name, free[a].lower)) + ":" +
+           format("%.10g", display_value(free[a].name, free[a].upper)) + "]\n";
+      s += "set yrange [" + format("%.10g", display_value(free[b].name, free[b].lower)) + ":" +
+           format("%.10g", display_value(free[b].name, free[b].upper)) + "]\n";
+      if (free[a].scale == optimise::ParameterSpec::Scale::log10) s += "set logscale x\n";
+      if (free[b].scale == optimise::ParameterSpec::Scale::log10) s += "set logscale y\n";
+      s += "set grid\nset key outside right\n";
+      const std::string file = "figures/positions_" + folder_name(free[a].name) + "_" + folder_name(free[b].name) + ".png";
+      const std::string error = run_gnuplot(s + "plot " + p + "\n", (fs::path(config.output) / file).string());
+      md << (error.empty() ? "![" + free[a].name + " against " + free[b].name + "](" + file + ")\n\n"
+                           : "*Figure not drawn: " + error + "*\n\n");
+    }
+  std::ofstream out(result.markdown_path);
+  out << md.str();
+  if (!out) throw CampaignError(result.markdown_path + ": cannot write");
+}
+
+}  // namespace
 
 StudyResult run_study(const StudyConfig& config, bool progress) {
   config.Validate();
-  fs::create_directories(config.output);
+  std::error_code ec;
+  fs::create_directories(config.output, ec);
+  if (ec) throw CampaignError(config.output + ": cannot create the study folder: " + ec.message());
+  const size_t cases = config.campaign.cases.size();
   StudyResult result;
-  json out = json::array();
-  std::map<std::string, std::vector<std::vector<double>>> convergence;  // method -> per-seed history
   for (const auto& method : config.methods) {
     StudyMethodResult r;
     r.method = method;
-    const int iterations = method.iterations > 0 ? method.iterations : config.campaign.optimiser.iterations;
-    r.method.iterations = iterations;
-    const std::string label = method.algorithm + "-" + std::to_string(iterations);
-    std::string safe = label;
-    std::replace(safe.begin(), safe.end(), ':', '_');
+    r.method.iterations = method.iterations > 0 ? method.iterations : config.campaign.optimiser.iterations;
+    r.method.label = method_label(method, r.method.iterations);
     for (const auto seed : config.seeds) {
       CampaignConfig c = config.campaign;
+      c.name = config.campaign.name + "/" + r.method.label + "/seed-" + std::to_string(seed);
       c.optimiser.algorithm = method.algorithm;
-      c.optimiser.iterations = iterations;
+      c.optimiser.iterations = r.method.iterations;
       c.optimiser.seed = seed;
-      c.output = (fs::path(config.output) / safe / ("seed-" + std::to_string(seed))).string();
+      c.output = (fs::path(config.output) / folder_name(r.method.label) / ("seed-" + std::to_string(seed))).string();
       c.archive = (fs::path(config.output) / "archive.sqlite").string();
       c.report = false;
       RunOptions options;
       options.progress = false;
+      options.resume = config.resume;
       const CampaignResult campaign = run_campaign(c, options);
-      ParameterSet best = campaign.best;
-      r.best_per_seed.push_back(best);
-      r.seeds.push_back(seed);
-      r.simulations = campaign.simulations;
-      r.wall_time_s += campaign.wall_time_s;
-      convergence[label].push_back(campaign.best_history);
+      StudyCampaign sc;
+      sc.seed = seed;
+      sc.status = campaign.status;
+      sc.message = campaign.message;
+      sc.best = campaign.best;
+      sc.simulations = campaign.simulations;
+      sc.simulated = campaign.simulated_this_session;
+      sc.wall_time_s = campaign.wall_time_s;
+      sc.best_history = campaign.best_history;
+      r.simulations_per_campaign = std::max(r.simulations_per_campaign, sc.simulations);
+      r.simulations_total += sc.simulations;
+      r.wall_time_s += sc.wall_time_s;
       if (progress)
-        std::cerr << label << " seed " << seed << ": best " << best.fitness << " (" << campaign.simulations
-                  << " simulations, " << campaign.wall_time_s << " s)\n";
+        std::cerr << r.method.label << " seed " << seed << ": best " << format("%.6g", sc.best.fitness) << " ("
+                  << sc.simulations << " simulations, " << sc.simulated << " new, " << format("%.1f", sc.wall_time_s)
+                  << " s)" << (sc.status == CampaignStatus::completed ? "" : " FAILED: " + sc.message) << "\n";
+      r.campaigns.push_back(std::move(sc));
     }
+    std::vector<size_t> order;
     std::vector<double> values;
-    for (const auto& b : r.best_per_seed)
-      if (std::isfinite(b.fitness)) values.push_back(b.fitness);
-    std::vector<size_t> order(r.best_per_seed.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-      const double fa = r.best_per_seed[a].fitness, fb = r.best_per_seed[b].fitness;
-      return (std::isfinite(fa) ? fa : INFINITY) < (std::isfinite(fb) ? fb : INFINITY);
-    });
-    for (size_t i = 0; i < order.size() && i < 5; ++i) r.five_best.push_back(r.best_per_seed[order[i]]);
-    if (!values.empty()) {
-      std::sort(values.begin(), values.end());
-      double sum = 0, sq = 0;
-      for (double v : values) sum += v, sq += v * v;
-      r.mean = sum / values.size();
-      r.stddev = values.size() > 1 ? std::sqrt(std::max(0.0, (sq - values.size() * r.mean * r.mean) / (values.size() - 1))) : 0;
-      r.min = values.front();
-      r.max = values.back();
-      r.median = values.size() % 2 ? values[values.size() / 2]
-                                   : 0.5 * (values[values.size() / 2 - 1] + values[values.size() / 2]);
+    for (size_t i = 0; i < r.campaigns.size(); ++i) {
+      values.push_back(r.campaigns[i].best.fitness);
+      if (std::isfinite(r.campaigns[i].best.fitness)) order.push_back(i);
     }
-    json seeds = json::array();
-    for (size_t i = 0; i < r.seeds.size(); ++i)
-      seeds.push_back({{"seed", r.seeds[i]}, {"params", r.best_per_seed[i].params},
-                       {"fitness", std::isfinite(r.best_per_seed[i].fitness) ? json(r.best_per_seed[i].fitness) : json(nullptr)}});
-    out.push_back({{"algorithm", method.algorithm}, {"iterations", iterations}, {"runs", seeds},
-                   {"fitness", {{"mean", r.mean}, {"stddev", r.stddev}, {"median", r.median}, {"min", r.min}, {"max", r.max}}},
-                   {"simulations_per_campaign", r.simulations}, {"wall_time_s", r.wall_time_s}});
-    result.methods.push_back(r);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](size_t a, size_t b) { return r.campaigns[a].best.fitness < r.campaigns[b].best.fitness; });
+    order.resize(std::min<size_t>(order.size(), 5));
+    r.five_best = order;
+    r.fitness = fitness_statistics(values);
+    result.methods.push_back(std::move(r));
   }
-  std::ofstream(fs::path(config.output) / "study.json") << json{{"methods", out}}.dump(2) << "\n";
+  result.common_budget = result.methods.front().simulations_per_campaign;
+  for (const auto& r : result.methods) result.common_budget = std::min(result.common_budget, r.simulations_per_campaign);
+  for (auto& r : result.methods) {
+    std::vector<double> at_budget;
+    for (const auto& c : r.campaigns) at_budget.push_back(best_after(c, result.common_budget, cases));
+    r.fitness_at_common_budget = fitness_statistics(at_budget);
+  }
 
-  // study.md: the paper's Tables 1-4 layout, then the statistics and a convergence figure.
-  std::ostringstream md;
-  const auto free = config.campaign.space.free_names();
-  md << "# Study: " << config.campaign.name << "\n\n" << config.seeds.size() << " seeds per method, objective "
-     << config.campaign.objective << ", population " << config.campaign.optimiser.population << ".\n\n";
-  md << "## Five best solution sets per method\n\n| Calibration process | Number of iterations | Run ID |";
-  for (const auto& n : free) md << " " << n << " |";
-  md << " Fitness (-) |\n| --- | --- | --- |";
-  for (size_t i = 0; i < free.size(); ++i) md << " --- |";
-  md << " --- |\n";
-  auto cell = [](const std::string& name, double v) {
-    char b[32];
-    const bool stiffness = name == "kn" || name == "ks" || name.ends_with(".kn") || name.ends_with(".ks");
-    std::snprintf(b, sizeof b, stiffness ? "%.3g GPa/m" : "%.2f", stiffness ? v / 1e9 : v);
-    return std::string(b);
-  };
-  for (const auto& r : result.methods)
-    for (size_t i = 0; i < r.five_best.size(); ++i) {
-      md << "| " << (i == 0 ? r.method.algorithm : "") << " | " << (i == 0 ? std::to_string(r.method.iterations) : "")
-         << " | " << i + 1 << " |";
-      for (const auto& n : free) md << " " << (r.five_best[i].params.count(n) ? cell(n, r.five_best[i].params.at(n)) : "-") << " |";
-      char f[32];
-      std::snprintf(f, sizeof f, "%.1f", r.five_best[i].fitness);
-      md << " " << f << " |\n";
-    }
-  md << "\n## Fitness of the best set per seed\n\n| method | iterations | simulations per campaign | mean | std | median | min | max | wall time (s) |\n"
-     << "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
+  json methods = json::array();
   for (const auto& r : result.methods) {
-    char line[320];
-    std::snprintf(line, sizeof line, "| %s | %d | %ld | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f |\n",
-                  r.method.algorithm.c_str(), r.method.iterations, r.simulations, r.mean, r.stddev, r.median, r.min,
-                  r.max, r.wall_time_s);
-    md << line;
+    auto campaign_json = [&](const StudyCampaign& c) {
+      return json{{"seed", c.seed},
+                  {"status", c.status == CampaignStatus::completed ? "completed" : "failed"},
+                  {"message", c.message},
+                  {"params", c.best.params},
+                  {"fitness", finite_or_null(c.best.fitness)},
+                  {"fitness_at_common_budget", finite_or_null(best_after(c, result.common_budget, cases))},
+                  {"simulations", c.simulations},
+                  {"simulated_this_session", c.simulated},
+                  {"wall_time_s", c.wall_time_s}};
+    };
+    json campaigns = json::array(), five = json::array();
+    for (const auto& c : r.campaigns) campaigns.push_back(campaign_json(c));
+    for (const size_t i : r.five_best) five.push_back(campaign_json(r.campaigns[i]));
+    methods.push_back({{"label", r.method.label},
+                       {"algorithm", r.method.algorithm},
+                       {"iterations", r.method.iterations},
+                       {"campaigns", campaigns},
+                       {"five_best", five},
+                       {"fitness", statistics_json(r.fitness)},
+                       {"fitness_at_common_budget", statistics_json(r.fitness_at_common_budget)},
+                       {"simulations_per_campaign", r.simulations_per_campaign},
+                       {"simulations_total", r.simulations_total},
+                       {"wall_time_s", r.wall_time_s}});
   }
-  // Mean of the per-seed best-so-far curves against simulations.
-  std::string script, plot = "set xlabel 'simulations'\nset ylabel 'mean best fitness over seeds'\nset logscale y\nset grid\nplot ";
-  int block = 0;
-  for (const auto& [label, histories] : convergence) {
-    size_t n = 0;
-    for (const auto& h : histories) n = std::max(n, h.size());
-    script += "$c" + std::to_string(block) + " << EOD\n";
-    for (size_t i = 0; i < n; ++i) {
-      double sum = 0;
-      int count = 0;
-      for (const auto& h : histories)
-        if (i < h.size() && std::isfinite(h[i])) sum += h[i], ++count;
-      if (count) script += std::to_string((i + 1) * config.campaign.cases.size()) + " " + std::to_string(sum / count) + "\n";
-    }
-    script += "EOD\n";
-    plot += std::string(block ? ", " : "") + "$c" + std::to_string(block) + " using 1:2 with lines lw 2 title '" + label + "'";
-    ++block;
+  std::vector<std::uint64_t> seeds = config.seeds;
+  const json study = {{"name", config.campaign.name},
+                      {"objective", config.campaign.objective},
+                      {"population", config.campaign.optimiser.population},
+                      {"seeds", seeds},
+                      {"common_budget", result.common_budget},
+                      {"archive", (fs::path(config.output) / "archive.sqlite").string()},
+                      {"methods", methods}};
+  result.json_path = (fs::path(config.output) / "study.json").string();
+  result.markdown_path = (fs::path(config.output) / "study.md").string();
+  {
+    std::ofstream out(result.json_path);
+    out << study.dump(2) << "\n";
+    if (!out) throw CampaignError(result.json_path + ": cannot write");
   }
-  fs::create_directories(fs::path(config.output) / "figures");
-  const std::string error = run_gnuplot(script + plot + "\n", (fs::path(config.output) / "figures" / "convergence.png").string());
-  md << "\n## Convergence\n\n"
-     << (error.empty() ? "![mean best fitness against simulations](figures/convergence.png)\n" : "*Figure not drawn: " + error + "*\n");
-  std::ofstream(fs::path(config.output) / "study.md") << md.str();
+  write_markdown(config, result);
   return result;
 }
 

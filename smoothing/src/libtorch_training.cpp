@@ -51,8 +51,14 @@ TrainingOutput train_libtorch(const TrainingBatch& tb, const SmootherOptions& op
     return h;
   };
 
+  CheckpointSelector selector(tb, options);
+  auto offer = [&](int epoch, const torch::Tensor& output) {
+    const torch::Tensor values = output.contiguous();
+    for (std::int64_t c = 0; c < batch; ++c) selector.offer(epoch, values.data_ptr<float>() + c * n, c);
+  };
   for (int epoch = 0; epoch < options.epochs; ++epoch) {
     torch::Tensor output = forward();
+    if (selector.due(epoch)) offer(epoch, output);
     // d(mean |y - t|)/dy per curve: the loss is summed over curves, so each network sees only its own.
     torch::Tensor delta = (output - target).sign_().mul_(inv_n);
     for (std::size_t l = layers; l-- > 0;) {
@@ -73,13 +79,9 @@ TrainingOutput train_libtorch(const TrainingBatch& tb, const SmootherOptions& op
     params.addcdiv_(adam_m, denom, -learning_rate_at(options, epoch) / correction1);
   }
 
-  torch::Tensor output = forward().contiguous();
-  torch::Tensor loss = (output - target).abs_().mean(1).contiguous();
-  TrainingOutput out;
-  out.prediction.assign(output.data_ptr<float>(), output.data_ptr<float>() + batch * n);
-  out.loss.assign(loss.data_ptr<float>(), loss.data_ptr<float>() + batch);
+  offer(options.epochs, forward());
   torch::set_num_threads(previous_threads);
-  return out;
+  return selector.result();
 }
 
 }  // namespace demcal::smoothing::detail

@@ -27,8 +27,31 @@ struct TrainingBatch {
 };
 
 struct TrainingOutput {
-  std::vector<float> prediction;  // [curves][points], normalised units
-  std::vector<float> loss;        // [curves], final mean absolute error, normalised units
+  std::vector<float> prediction;  // [curves][points], normalised units (the chosen checkpoint)
+  std::vector<float> loss;        // [curves], mean absolute error there, normalised units
+  std::vector<int> epoch;         // [curves], Adam steps behind the chosen checkpoint
+  std::vector<float> estimate;    // [curves], the stopping rule's error estimate there, normalised
+};
+
+// The stopping rule, shared by both backends: scores the fit of every curve at checkpoints and
+// keeps the best (StoppingRule::trend_spectrum) or the latest (fixed_budget). Backends call
+// offer() with the network outputs of all curves after `epoch` Adam steps; at epoch 0, every
+// check_interval epochs and after the last epoch.
+class CheckpointSelector {
+ public:
+  CheckpointSelector(const TrainingBatch& batch, const SmootherOptions& options);
+  bool due(int epoch) const { return epoch % check_interval_ == 0; }
+  // `fit`: the `points` outputs of curve `curve`.
+  void offer(int epoch, const float* fit, std::int64_t curve);
+  TrainingOutput result() const { return best_; }
+
+ private:
+  const TrainingBatch& batch_;
+  bool keep_best_;
+  int check_interval_;
+  int cutoff_;
+  std::vector<double> basis_;  // [cutoff][points]: orthonormal DCT-II rows 1..cutoff
+  TrainingOutput best_;
 };
 
 // Adam constants and the cosine schedule shared by both backends.

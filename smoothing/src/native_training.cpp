@@ -46,8 +46,10 @@ inline float dot(const float* a, const float* b, std::int64_t n) {
 
 // Arrays are feature-major ([feature][point]) so that every inner loop runs over the 200 points.
 __attribute__((target_clones("arch=x86-64-v3", "default")))
-void train_curve(const TrainingBatch& tb, const SmootherOptions& options, const float* x, const float* target,
-                 float* prediction, float* final_loss) {
+void train_curve(const TrainingBatch& tb, const SmootherOptions& options, std::int64_t curve,
+                 CheckpointSelector* selector) {
+  const float* x = tb.x.data() + curve * tb.points;
+  const float* target = tb.y.data() + curve * tb.points;
   const std::int64_t n = tb.points;
   const std::size_t layers = tb.layers.size();
   std::vector<float> p = tb.initial_parameters, g(p.size()), m(p.size(), 0.0f), v(p.size(), 0.0f);
@@ -85,6 +87,7 @@ void train_curve(const TrainingBatch& tb, const SmootherOptions& options, const 
   for (int epoch = 0; epoch < options.epochs; ++epoch) {
     forward();
     const float* out = activation[layers].data();
+    if (selector->due(epoch)) selector->offer(epoch, out, curve);
     for (std::int64_t k = 0; k < n; ++k) {
       const float d = out[k] - target[k];
       delta[static_cast<std::size_t>(k)] = static_cast<float>((d > 0) - (d < 0)) * inv_n;
@@ -130,25 +133,15 @@ void train_curve(const TrainingBatch& tb, const SmootherOptions& options, const 
     }
   }
   forward();
-  double loss = 0;
-  const float* out = activation[layers].data();
-  for (std::int64_t k = 0; k < n; ++k) {
-    prediction[k] = out[k];
-    loss += std::abs(static_cast<double>(out[k]) - target[k]);
-  }
-  *final_loss = static_cast<float>(loss / static_cast<double>(n));
+  selector->offer(options.epochs, activation[layers].data(), curve);
 }
 
 }  // namespace
 
 TrainingOutput train_native(const TrainingBatch& tb, const SmootherOptions& options) {
-  TrainingOutput out;
-  out.prediction.resize(static_cast<std::size_t>(tb.curves * tb.points));
-  out.loss.resize(static_cast<std::size_t>(tb.curves));
-  for (std::int64_t c = 0; c < tb.curves; ++c)
-    train_curve(tb, options, tb.x.data() + c * tb.points, tb.y.data() + c * tb.points,
-                out.prediction.data() + c * tb.points, out.loss.data() + c);
-  return out;
+  CheckpointSelector selector(tb, options);
+  for (std::int64_t c = 0; c < tb.curves; ++c) train_curve(tb, options, c, &selector);
+  return selector.result();
 }
 
 }  // namespace demcal::smoothing::detail

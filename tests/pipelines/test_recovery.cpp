@@ -19,6 +19,7 @@
 #include <fstream>
 #include <iostream>
 #include <random>
+#include <vector>
 
 namespace fs = std::filesystem;
 using namespace demcal;
@@ -43,9 +44,10 @@ double normal(std::mt19937_64& rng) {
   return std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
 }
 
-// The truth's recording thinned to one row in 10 with Gaussian noise on every column (SI units).
-smoothing::Curve noisy_measurement(const smoothing::Curve& truth) {
-  std::mt19937_64 rng(2024);
+// The truth's recording thinned to one row in 10 with Gaussian noise on every column (SI units);
+// `noise_seed` picks the draw (2024: the measurement that is calibrated).
+smoothing::Curve noisy_measurement(const smoothing::Curve& truth, std::uint64_t noise_seed = 2024) {
+  std::mt19937_64 rng(noise_seed);
   smoothing::Curve m;
   m.source = "synthetic";
   for (const char* name : {"load_vertical", "abutment_horizontal", "force"}) m.columns.push_back({name, "", {}});
@@ -92,17 +94,27 @@ TEST(Recovery, SyntheticArchMeasurementIsCalibratedBackWithinTheNoise) {
   const CampaignResult result = run_campaign(config, options);
   ASSERT_EQ(result.status, CampaignStatus::completed) << result.message;
 
-  // Curves within the noise: the calibrated set fits the measurement as well as the true parameters
-  // do (the truth's misfit is the noise's), up to the spread the noise itself gives a fitness.
-  const double at_truth = smoothing::Objective2(measured, config.objective_options, config.smoother)
-                              .evaluate(truth.curves)
-                              .fitness;
-  // NOT YET MET: the "within the noise" would be best <= at_truth x (1 + band) (band 0.05).
-  // This campaign reaches 1.4-2x the truth's misfit (measured: 6551 vs 3345 here), because the
-  // swarm stops in a neighbouring (kn, ks) valley and the polish does not leave it (docs/pipelines.md,
-  // "Recovery"). The bound below is the measured envelope with a margin, so that a regression (a
-  // campaign that leaves the basin) fails; tighten it when the search improves.
-  EXPECT_LE(result.best.fitness, at_truth * 2.5) << "truth " << at_truth;
+  // "Within the noise" (docs/pipelines.md, "Recovery"): the calibrated set fits the measurement
+  // as well as the TRUE parameters fit measurements that differ from it only by their noise draw.
+  // The truth's misfit over kNoiseDraws draws (draw 0 is the calibrated measurement) gives the
+  // spread that noise alone causes; the calibrated misfit must not exceed its mean + 2 sd.
+  constexpr int kNoiseDraws = 8;
+  std::vector<double> truth_misfit;
+  for (int k = 0; k < kNoiseDraws; ++k)
+    truth_misfit.push_back(smoothing::Objective2(noisy_measurement(truth.curves, 2024 + k), config.objective_options,
+                                                 config.smoother)
+                               .evaluate(truth.curves)
+                               .fitness);
+  double mean = 0, sq = 0;
+  for (double f : truth_misfit) mean += f / kNoiseDraws;
+  for (double f : truth_misfit) sq += (f - mean) * (f - mean);
+  const double sd = std::sqrt(sq / (kNoiseDraws - 1));
+  const double at_truth = truth_misfit.front();
+  const double within_noise = mean + 2 * sd;
+  std::cout << "recovery: misfit of the truth over " << kNoiseDraws << " noise draws:";
+  for (double f : truth_misfit) std::cout << " " << f;
+  std::cout << "\n  mean " << mean << " sd " << sd << " -> within the noise: <= " << within_noise << "\n";
+  EXPECT_LE(result.best.fitness, within_noise) << "truth " << at_truth;
   EXPECT_NEAR(result.best.params.at("friction_deg"), kTrueFriction, 1.0);
 
   // Identifiability is reported for every free parameter, and the band holds the best set.
@@ -122,6 +134,7 @@ TEST(Recovery, SyntheticArchMeasurementIsCalibratedBackWithinTheNoise) {
   EXPECT_EQ(written["polish"]["evaluations"].get<long>(), result.polish_evaluations);
   RecordProperty("best_fitness", std::to_string(result.best.fitness));
   RecordProperty("fitness_at_truth", std::to_string(at_truth));
+  RecordProperty("within_noise_bound", std::to_string(within_noise));
   std::cout << "recovery: best " << written["best"].dump() << "\n  fitness at truth " << at_truth
             << "\n  identifiability " << written["identifiability"].dump() << "\n  polish " << written["polish"].dump()
             << "\n";

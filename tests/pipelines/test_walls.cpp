@@ -64,7 +64,8 @@ CampaignConfig tiny_wall_campaign(const fs::path& out) {
 
 TEST(Walls, EveryBundledCampaignParsesValidatesAndMatchesItsTest) {
   const auto files = campaign_files();
-  ASSERT_GE(files.size(), 10u);  // 7 walls, the beam-rotation trial, the worth test and its prediction
+  // 7 walls, the beam-rotation and 10-course trials, the worth test and its prediction.
+  ASSERT_EQ(files.size(), 11u);
   EXPECT_TRUE(fs::exists(kWalls / "LICENSE"));
   EXPECT_TRUE(fs::exists(kWalls / "README.md"));
   std::set<std::string> walls_seen;

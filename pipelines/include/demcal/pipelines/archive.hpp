@@ -45,6 +45,8 @@ class ArchiveError : public std::runtime_error {
 // Exact key of a parameter set: "name=<hex float>;..." sorted by name (e.g. "kn=0x1.dcd65p+31").
 // Two sets share a key exactly when every value is bit-identical.
 std::string parameter_key(const std::map<std::string, double>& params);
+// The parameter set back from its key, bit-identical (parameters cross processes and ranks as keys).
+std::map<std::string, double> params_from_key(const std::string& key);
 
 // FNV-1a 64-bit hash of a text, as 16 hex digits (model and objective keys).
 std::string hash_text(const std::string& text);

@@ -13,10 +13,17 @@
 // The neural smoother (paper section 3.4.2): input displacement, output force, five hidden dense
 // layers of 20 tanh neurons, linear output, mean absolute error loss, Adam, full batch, all points
 // used for training. Inputs are scaled to [-1, 1] and outputs to zero mean and unit standard
-// deviation. Stopping rule: a fixed budget of `epochs` Adam steps with the learning rate decayed
-// from learning_rate to final_learning_rate (cosine). The budget is chosen with the synthetic
-// benchmark (synthetic.hpp, docs/smoothing.md) so that the network follows the trend but not the
-// oscillations and stick-slip drops; the tests check both sides of that rule.
+// deviation. Adam runs a budget of `epochs` steps with the learning rate decayed from
+// learning_rate to final_learning_rate (cosine). Stopping rule (StoppingRule::trend_spectrum, the
+// default): every `check_interval` epochs the fit is scored by an estimate of its error to the
+// unknown smooth truth, made from the data alone with the orthonormal DCT-II of the 200 points:
+//   estimate^2 = (low-band power of the residual raw - fit) + (high-band power of the fit),
+// low band = DCT indices 1..trend_cutoff (index k is k/2 cycles over the range), high band above.
+// The residual's low band is trend the fit still misses; the fit's high band is oscillation it has
+// learned. The checkpoint with the lowest estimate is returned (so training past the point where
+// the network starts to follow the oscillations costs nothing but time). StoppingRule::fixed_budget
+// returns the network after the whole budget. Settings chosen with the synthetic benchmark
+// (synthetic.hpp, docs/smoothing.md); the tests check both sides of the rule.
 // Many curves train in one call (smooth_batch): with the libtorch backend as one batched model (the
 // weights of all networks stacked along a leading "curve" dimension, every layer one batched matrix
 // product), with the native backend one network after another in the same call. Each curve has its
@@ -41,16 +48,26 @@ enum class SmootherBackend { native, libtorch };
 std::string to_string(SmootherBackend backend);
 SmootherBackend parse_smoother_backend(const std::string& name);  // "native" | "libtorch"
 
+// How the returned network is chosen among the training epochs (see the header comment).
+enum class StoppingRule { trend_spectrum, fixed_budget };
+std::string to_string(StoppingRule rule);
+StoppingRule parse_stopping_rule(const std::string& name);  // "trend-spectrum" | "fixed-budget"
+
 struct SmootherOptions {
-  int points = 200;                    // output (and training) points per curve, >= 4
-  int hidden_layers = 5;               // dense tanh layers
-  int hidden_width = 20;               // neurons per hidden layer
-  int epochs = 400;                    // fixed Adam budget (the stopping rule), >= 1
-  double learning_rate = 0.01;         // Adam step at the start, > 0
-  double final_learning_rate = 0.001;  // step at the last epoch (cosine decay), in (0, learning_rate]
+  int points = 200;                     // output (and training) points per curve, >= 4
+  int hidden_layers = 5;                // dense tanh layers
+  int hidden_width = 20;                // neurons per hidden layer
+  int epochs = 400;                     // Adam budget (epochs), >= 1
+  double learning_rate = 0.01;          // Adam step at the start, > 0
+  double final_learning_rate = 0.001;   // step at the last epoch (cosine decay), in (0, learning_rate]
   // Scale of the first layer's initial weights relative to Glorot-uniform: > 1 starts the tanh
   // units in their nonlinear range, so a peaked curve is reached in fewer epochs. > 0.
   double first_layer_gain = 3.0;
+  StoppingRule stopping = StoppingRule::trend_spectrum;
+  int check_interval = 10;              // epochs between scored checkpoints (trend_spectrum), >= 1
+  // Highest DCT index counted as trend (trend_spectrum): 24 = 12 cycles over the curve's range.
+  // In [1, points - 2].
+  int trend_cutoff = 24;
   std::uint64_t seed = 1;              // initial weights
   SmootherBackend backend = SmootherBackend::native;
   int threads = 1;                     // LibTorch intra-op threads (libtorch backend; calling thread)
@@ -68,6 +85,10 @@ struct SmoothResult {
   XYSeries smoothed;       // `points` points, x evenly spaced over the input's range
   XYSeries training;       // the discretised input the network was trained on (same x)
   double final_loss = 0;   // mean absolute error on `training`, in the input's force unit
+  int epochs_trained = 0;  // Adam steps behind the returned network (the chosen checkpoint)
+  // The stopping rule's estimate of the RMS error to the smooth truth at that checkpoint (force
+  // unit; computed for either rule).
+  double estimated_error = 0;
 };
 
 // Smooths every input with its own network, all trained together in one batched model.
