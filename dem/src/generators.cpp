@@ -179,6 +179,8 @@ void WallOptions::Validate() const {
   check(max_displacement > 0 && std::isfinite(max_displacement), "--max-displacement", "must be positive", max_displacement);
   check(beam_height > 0, "--beam-height", "must be positive", beam_height);
   check(load_height >= 0, "--load-height", "must not be negative", load_height);
+  check(actuator_stiffness > 0 && std::isfinite(actuator_stiffness), "--actuator-stiffness", "must be positive",
+        actuator_stiffness);
 }
 
 Scene make_wall(const WallOptions& o) {
@@ -227,7 +229,7 @@ Scene make_wall(const WallOptions& o) {
   s.loading.direction = Vec2(1, 0);
   s.loading.velocity = o.velocity;
   s.loading.max_displacement = o.max_displacement;
-  s.loading.stiffness = o.kn * o.length * o.thickness;
+  s.loading.stiffness = o.actuator_stiffness;
   s.loading.compression_only = false;
   s.loading.record_interval = o.max_displacement / 1000;
   s.gauges.push_back({"top_horizontal", "beam", load_point, Vec2(1, 0)});

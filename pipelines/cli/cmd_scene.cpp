@@ -55,6 +55,7 @@ void setup_scene(CLI::App& app) {
   w->add_option("--max-displacement", wall.max_displacement, "Horizontal travel of the top (m)")->capture_default_str();
   w->add_flag("--beam-rotation,!--no-beam-rotation", wall.beam_rotation, "Let the top beam rotate")->capture_default_str();
   w->add_option("--load-height", wall.load_height, "Height of the actuator above the wall top (m)")->capture_default_str();
+  w->add_option("--actuator-stiffness", wall.actuator_stiffness, "Actuator spring stiffness (N/m)")->capture_default_str();
   w->add_option("--max-time", wall.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
   w->add_option("-o,--output", wall_out, "Scene file to write")->required();
   w->callback([] {

@@ -18,6 +18,7 @@ struct SmoothArgs {
   int epochs = demcal::smoothing::SmootherOptions{}.epochs;
   int window = 0;  // 0 = the method's default
   std::string backend = "native";
+  std::string stopping = "trend-spectrum";
 };
 
 void run_smooth(const SmoothArgs& a) {
@@ -37,6 +38,7 @@ void run_smooth(const SmoothArgs& a) {
     options.seed = a.seed;
     options.epochs = a.epochs;
     options.backend = parse_smoother_backend(a.backend);
+    options.stopping = parse_stopping_rule(a.stopping);
     smoothed = smooth_dnn(input, options);
   } else if (a.method == "moving-average") {
     smoothed = moving_average(input, a.window ? a.window : kDefaultMovingAverageWindow, a.points);
@@ -73,7 +75,10 @@ void setup(CLI::App& app) {
       ->check(CLI::IsMember({"dnn", "moving-average", "savitzky-golay"}));
   sub->add_option("--points", args->points, "Output points, evenly spaced in x")->check(CLI::Range(4, 1000000));
   sub->add_option("--seed", args->seed, "Seed of the network's initial weights");
-  sub->add_option("--epochs", args->epochs, "Adam epochs of the network (the stopping rule)")->check(CLI::Range(1, 1000000));
+  sub->add_option("--epochs", args->epochs, "Adam epoch budget of the network")->check(CLI::Range(1, 1000000));
+  sub->add_option("--stopping", args->stopping,
+                  "trend-spectrum (best checkpoint by the data-driven error estimate) | fixed-budget (all epochs)")
+      ->capture_default_str();
   sub->add_option("--window", args->window, "Window (points, odd) of the baselines; 0 = default");
   sub->add_option("--backend", args->backend, "Network training: native (default) or libtorch")
       ->check(CLI::IsMember({"native", "libtorch"}));

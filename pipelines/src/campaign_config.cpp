@@ -197,7 +197,8 @@ json optimiser_to_json(const optimise::OptimiserOptions& o) {
 
 void parse_smoother(const json& j, smoothing::SmootherOptions& s, const std::string& where) {
   reject_unknown_keys(j, {"points", "hidden_layers", "hidden_width", "epochs", "learning_rate",
-                          "final_learning_rate", "seed", "threads"},
+                          "final_learning_rate", "first_layer_gain", "stopping", "check_interval",
+                          "trend_cutoff", "backend", "seed", "threads"},
                       where);
   read_field(j, "points", s.points, where);
   read_field(j, "hidden_layers", s.hidden_layers, where);
@@ -205,14 +206,34 @@ void parse_smoother(const json& j, smoothing::SmootherOptions& s, const std::str
   read_field(j, "epochs", s.epochs, where);
   read_field(j, "learning_rate", s.learning_rate, where);
   read_field(j, "final_learning_rate", s.final_learning_rate, where);
+  read_field(j, "first_layer_gain", s.first_layer_gain, where);
+  read_field(j, "check_interval", s.check_interval, where);
+  read_field(j, "trend_cutoff", s.trend_cutoff, where);
   read_field(j, "seed", s.seed, where);
   read_field(j, "threads", s.threads, where);
+  std::string text;
+  try {
+    if (j.contains("stopping")) {
+      read_field(j, "stopping", text, where);
+      s.stopping = smoothing::parse_stopping_rule(text);
+    }
+    if (j.contains("backend")) {
+      read_field(j, "backend", text, where);
+      s.backend = smoothing::parse_smoother_backend(text);
+    }
+  } catch (const std::invalid_argument& e) {
+    throw CampaignError(where + ": " + e.what());
+  }
 }
 
+// Every option that changes a smoothed curve is here: it is part of the objective key under which
+// the archive keeps fitness values, so values of another smoother are never read back.
 json smoother_to_json(const smoothing::SmootherOptions& s) {
   return {{"points", s.points}, {"hidden_layers", s.hidden_layers}, {"hidden_width", s.hidden_width},
           {"epochs", s.epochs}, {"learning_rate", s.learning_rate}, {"final_learning_rate", s.final_learning_rate},
-          {"seed", s.seed}, {"threads", s.threads}};
+          {"first_layer_gain", s.first_layer_gain}, {"stopping", smoothing::to_string(s.stopping)},
+          {"check_interval", s.check_interval}, {"trend_cutoff", s.trend_cutoff},
+          {"backend", smoothing::to_string(s.backend)}, {"seed", s.seed}, {"threads", s.threads}};
 }
 
 json scene_to_json_spec(const SceneSpec& s) {

@@ -186,7 +186,7 @@ TEST(Campaign, BadInputGivesMessagesNamingTheProblem) {
 }
 
 TEST(Campaign, MeasuredColumnsAreMappedToEngineNamesInSI) {
-  const std::string file = std::string(DEMCAL_SHARED_DIR) + "/data/stone-masonry-db/curves/FD_SW301_Lourenco2005.csv";
+  const std::string file = std::string(DEMCAL_SOURCE_DIR) + "/data/walls/FD_SW301_Lourenco2005.csv";
   if (!fs::exists(file)) GTEST_SKIP() << "no shared data at " << file;
   MeasuredSpec spec;
   spec.file = file;

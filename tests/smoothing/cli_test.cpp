@@ -46,7 +46,8 @@ class Cli : public ::testing::Test {
   fs::path dir_;
 };
 
-std::string lab_curve() { return std::string(DEMCAL_SHARED_DIR) + "/data/stone-masonry-db/curves/FD_SW301_Lourenco2005.csv"; }
+// The bundled copy of a Lourenço 2005 curve (data/walls/, MIT licence beside it).
+std::string lab_curve() { return std::string(DEMCAL_SOURCE_DIR) + "/data/walls/FD_SW301_Lourenco2005.csv"; }
 
 void expect_failure(const CommandRun& r, const std::vector<std::string>& fragments) {
   EXPECT_NE(r.status, 0) << r.output;
@@ -70,6 +71,14 @@ TEST_F(Cli, SmoothWritesTheInputsColumnNamesAndAPlot) {
   const Curve m = read_curve(path("m.csv"));
   EXPECT_EQ(m.column_names(), (std::vector<std::string>{"drift", "horizontal_force"}));
   EXPECT_EQ(m.rows(), 50u);
+}
+
+TEST_F(Cli, SmoothStoppingRuleIsSelectable) {
+  const CommandRun fixed = run("smooth " + lab_curve() + " --out " + path("f.csv") + " --epochs 60 --stopping fixed-budget");
+  ASSERT_EQ(fixed.status, 0) << fixed.output;
+  const CommandRun rule = run("smooth " + lab_curve() + " --out " + path("r.csv") + " --epochs 60 --stopping trend-spectrum");
+  ASSERT_EQ(rule.status, 0) << rule.output;
+  expect_failure(run("smooth " + lab_curve() + " --out " + path("x.csv") + " --stopping bogus"), {"bogus", "trend-spectrum"});
 }
 
 TEST_F(Cli, FitnessPrintsJson) {

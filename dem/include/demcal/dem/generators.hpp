@@ -67,6 +67,9 @@ struct WallOptions {
   bool beam_rotation = false;      // true: the top beam may rotate
   double beam_height = 0.1;        // m
   double load_height = 0.1;        // m above the top of the wall where the actuator pushes
+  // N/m of the actuator spring. Independent of the joints' kn (calibration changes kn, not the
+  // rig); stiff against the walls (15-50 kN/mm measured) without ringing at the time step.
+  double actuator_stiffness = 2e8;
   double max_time = 0;             // s; 0 = travel time x 1.5 + 5 s
 
   void Validate() const;
