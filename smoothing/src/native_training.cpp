@@ -2,7 +2,7 @@
 // LibTorch backend, in plain loops over float arrays that the compiler vectorises (an AVX2+FMA clone
 // is chosen at run time where the CPU has it). It exists because the Debian LibTorch is built without
 // an optimised BLAS (BLAS_INFO=generic): its 200x20x20 products run at a few GFLOPS, too slow for
-// the smoothing speed goals (figures in docs/benchmarks-smoothing.md).
+// the smoothing speed goals (figures in docs/benchmarks.md).
 #include "mlp_training.hpp"
 
 #include <algorithm>

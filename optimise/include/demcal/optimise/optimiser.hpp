@@ -113,7 +113,7 @@ struct OptimiserOptions {
   double initial_velocity = 0.0;  // v0 uniform in [-a, a] per coordinate (unit-cube lengths)
   BoundHandling bounds = BoundHandling::clamp;
   // TBPSO reading of Δx: "paper" (x_i − x_j, eq. 13 as printed) or "toward" (x_j − x_i). Default
-  // "paper": in the benchmark (docs/benchmarks-optimise.md) it has the lower median on 3 of 4
+  // "paper": in the benchmark (docs/benchmarks.md) it has the lower median on 3 of 4
   // functions at 200 evaluations in 3-D (the campaigns' 20 x 10) and on 4 of 4 at 500; "toward"
   // wins at 200 evaluations in 10-D. Caveat: trust grows by one per iteration without bound
   // (eq. 12), so long runs are erratic with either reading (Sphere 3-D, 2000 evaluations, 25
