@@ -304,7 +304,8 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
   md << "demcal " << version() << "; algorithm " << config.optimiser.algorithm << ", population "
      << config.optimiser.population << ", seed " << config.optimiser.seed << ", objective " << config.objective
      << "; " << result.iterations << " iterations, " << result.simulations << " simulations (" << result.failed_runs
-     << " candidates failed); optimiser status " << result.optimiser_status << ".\n\n";
+     << " candidates without a finite fitness: a failed run, or a curve with no displacement window in common with "
+        "the measurement, which ranks worst); optimiser status " << result.optimiser_status << ".\n\n";
 
   md << "## Best parameters\n\n| parameter | value |\n| --- | --- |\n";
   for (const auto& [name, value] : result.best.params) md << "| " << name << " | " << fmt(value) << " |\n";
