@@ -51,16 +51,9 @@ class GeneticOptimiser final : public Optimiser {
   bool can_substitute() const override { return true; }
 
   void substitute(std::size_t index, const Eigen::VectorXd& physical_point) override {
-    if (!pending_) throw std::logic_error(name_ + ": substitute() needs a pending ask()");
-    if (index >= static_cast<std::size_t>(pending_count_))
-      throw std::invalid_argument(name_ + ": substitute() index " + std::to_string(index) + " outside the batch of " +
-                                  std::to_string(pending_count_));
-    const Eigen::VectorXd unit = space_.to_unit(physical_point);
-    for (int k = 0; k < d_; ++k)
-      if (!(unit[k] >= -1e-12 && unit[k] <= 1.0 + 1e-12))
-        throw std::invalid_argument(name_ + ": substituted value " + std::to_string(physical_point[k]) +
-                                    " of parameter '" + space_.free_parameters()[k].name + "' is outside its bounds");
-    genes_.row(first_candidate_ + static_cast<Eigen::Index>(index)) = unit.cwiseMax(0.0).cwiseMin(1.0).transpose();
+    const Eigen::VectorXd unit =
+        detail::substitution_in_unit_cube(name_, space_, pending_, pending_count_, index, physical_point);
+    genes_.row(first_candidate_ + static_cast<Eigen::Index>(index)) = unit.transpose();
   }
 
   nlohmann::json save_state() const override {

@@ -63,4 +63,21 @@ std::unique_ptr<Optimiser> make_nlopt(const ParameterSpace& space, const Optimis
 // "LN_BOBYQA" from "nlopt:LN_BOBYQA", "nlopt:nlopt_ln_bobyqa", ...; empty if not an nlopt name.
 std::string nlopt_name_from_algorithm(const std::string& algorithm);
 
+// Checks a candidate substituted from outside (a surrogate's pick) for the pending batch and
+// returns it in the unit cube, clamped against round-off at the bounds.
+inline Eigen::VectorXd substitution_in_unit_cube(const std::string& name, const ParameterSpace& space, bool pending,
+                                                 int pending_count, std::size_t index,
+                                                 const Eigen::VectorXd& physical_point) {
+  if (!pending) throw std::logic_error(name + ": substitute() needs a pending ask()");
+  if (index >= static_cast<std::size_t>(pending_count))
+    throw std::invalid_argument(name + ": substitute() index " + std::to_string(index) + " outside the batch of " +
+                                std::to_string(pending_count));
+  const Eigen::VectorXd unit = space.to_unit(physical_point);
+  for (Eigen::Index k = 0; k < unit.size(); ++k)
+    if (!(unit[k] >= -1e-12 && unit[k] <= 1.0 + 1e-12))
+      throw std::invalid_argument(name + ": substituted value " + std::to_string(physical_point[k]) + " of parameter '" +
+                                  space.free_parameters()[static_cast<std::size_t>(k)].name + "' is outside its bounds");
+  return unit.cwiseMax(0.0).cwiseMin(1.0);
+}
+
 }  // namespace demcal::optimise::detail
