@@ -1,6 +1,7 @@
 // Campaigns end to end through the external-command backend (a small Python simulator in this
 // folder, not demcal code), bad input, and kill -9 / --resume through the demcal program.
 #include "demcal/pipelines/archive.hpp"
+#include "test_support.hpp"
 #include "demcal/pipelines/backend.hpp"
 #include "demcal/pipelines/campaign.hpp"
 #include "demcal/pipelines/process.hpp"
@@ -24,16 +25,12 @@ using nlohmann::json;
 
 namespace {
 
-const std::string kSimulator = std::string(DEMCAL_SOURCE_DIR) + "/tests/pipelines/toy_simulator.py";
+fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("campaign", name); }
+using test_support::read_json;
 
-std::string python() { return fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3"; }
+const std::string& kSimulator = test_support::kToySimulator;
+using test_support::python;
 
-fs::path fresh_dir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("demcal-test-campaign-" + name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
 // The "measurement": the simulator at k = 2e7 N/m, friction 32 deg, with 20 N of noise.
 std::string make_measurement(const fs::path& dir) {
@@ -59,10 +56,6 @@ json toy_campaign(const fs::path& dir, const std::string& extra_args = "") {
           {"report", false}};
 }
 
-json read_json(const fs::path& path) {
-  std::ifstream in(path);
-  return json::parse(in);
-}
 
 }  // namespace
 

@@ -2,6 +2,7 @@
 // small Python simulator in this folder (tiny budgets; objective 1). Checks study.json and study.md
 // against the campaigns' own result.json files, the rerun from the archive, and bad input.
 #include "demcal/pipelines/process.hpp"
+#include "test_support.hpp"
 #include "demcal/pipelines/study.hpp"
 
 #include <gtest/gtest.h>
@@ -18,21 +19,13 @@ using nlohmann::json;
 
 namespace {
 
-const std::string kSimulator = std::string(DEMCAL_SOURCE_DIR) + "/tests/pipelines/toy_simulator.py";
+fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("study", name); }
+using test_support::read_json;
 
-std::string python() { return fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3"; }
+const std::string& kSimulator = test_support::kToySimulator;
+using test_support::python;
 
-fs::path fresh_dir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("demcal-test-study-" + name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
-json read_json(const fs::path& path) {
-  std::ifstream in(path);
-  return json::parse(in);
-}
 
 std::string read_text(const fs::path& path) {
   std::ifstream in(path);

@@ -3,6 +3,7 @@
 // predict_cases (the worth test's prediction step) agrees with the campaign's own fitness.
 #include "demcal/dem/scene.hpp"
 #include "demcal/pipelines/campaign.hpp"
+#include "test_support.hpp"
 #include "demcal/pipelines/predict.hpp"
 
 #include <gtest/gtest.h>
@@ -20,6 +21,9 @@ using nlohmann::json;
 
 namespace {
 
+fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("walls", name); }
+using test_support::read_json;
+
 const fs::path kWalls = fs::path(DEMCAL_SOURCE_DIR) / "data" / "walls";
 
 // Applied vertical stress of each test (the database's sigma_0,pc, MPa), by test name prefix.
@@ -34,17 +38,7 @@ std::vector<fs::path> campaign_files() {
   return files;
 }
 
-json read_json(const fs::path& path) {
-  std::ifstream in(path);
-  return json::parse(in);
-}
 
-fs::path fresh_dir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("demcal-test-walls-" + name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
 // The SW.30.1 campaign cut down to a test budget: 2 iterations x 3 particles, 3 contact points
 // per joint, 3 mm of travel (the measured curve is compared over the shared 0-3 mm window).
