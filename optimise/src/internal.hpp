@@ -63,6 +63,14 @@ std::unique_ptr<Optimiser> make_nlopt(const ParameterSpace& space, const Optimis
 // "LN_BOBYQA" from "nlopt:LN_BOBYQA", "nlopt:nlopt_ln_bobyqa", ...; empty if not an nlopt name.
 std::string nlopt_name_from_algorithm(const std::string& algorithm);
 
+// tell() must answer a pending ask() with one fitness per candidate of that batch.
+inline void check_told_batch(const std::string& name, bool pending, int pending_count, std::size_t told) {
+  if (!pending) throw std::logic_error(name + ": tell() without a pending ask()");
+  if (static_cast<int>(told) != pending_count)
+    throw std::invalid_argument(name + ": tell() got " + std::to_string(told) + " values for " +
+                                std::to_string(pending_count) + " candidates");
+}
+
 // Checks a candidate substituted from outside (a surrogate's pick) for the pending batch and
 // returns it in the unit cube, clamped against round-off at the bounds.
 inline Eigen::VectorXd substitution_in_unit_cube(const std::string& name, const ParameterSpace& space, bool pending,

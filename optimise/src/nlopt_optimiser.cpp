@@ -58,9 +58,7 @@ class NloptOptimiser final : public Optimiser {
   }
 
   void tell(const std::vector<double>& fitness) override {
-    if (!pending_) throw std::logic_error(name_ + ": tell() without a pending ask()");
-    if (fitness.size() != 1)
-      throw std::invalid_argument(name_ + ": tell() got " + std::to_string(fitness.size()) + " values for 1 candidate");
+    detail::check_told_batch(name_, pending_, 1, fitness.size());
     const double value = record(point_, fitness[0]);
     history_.push_back({point_, value});
     pending_ = false;

@@ -98,10 +98,7 @@ class SwarmOptimiser final : public Optimiser {
   }
 
   void tell(const std::vector<double>& fitness) override {
-    if (!pending_) throw std::logic_error(name_ + ": tell() without a pending ask()");
-    if (static_cast<int>(fitness.size()) != pending_count_)
-      throw std::invalid_argument(name_ + ": tell() got " + std::to_string(fitness.size()) + " values for " +
-                                  std::to_string(pending_count_) + " candidates");
+    detail::check_told_batch(name_, pending_, pending_count_, fitness.size());
     for (int i = 0; i < pending_count_; ++i) {
       fx_[i] = record(x_.row(i).transpose(), fitness[static_cast<std::size_t>(i)]);
       if (fx_[i] <= fp_[i]) {
