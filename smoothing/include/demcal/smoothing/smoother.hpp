@@ -48,6 +48,13 @@ enum class SmootherBackend { native, libtorch };
 std::string to_string(SmootherBackend backend);
 SmootherBackend parse_smoother_backend(const std::string& name);  // "native" | "libtorch"
 
+// The libtorch backend lives in a plugin, libdemcal_torch.so, opened on its first use, so that a
+// program that trains no network never loads LibTorch (whose start-up costs most of a second).
+// Searched: only the file named by $DEMCAL_TORCH_PLUGIN when it is set; else, in order, the running
+// program's folder, <program folder>/../lib/demcal, and the build tree the module was compiled in. Returns the path of
+// the loaded plugin; throws std::runtime_error naming every place searched when none loads.
+std::string libtorch_plugin_path();
+
 // How the returned network is chosen among the training epochs (see the header comment).
 enum class StoppingRule { trend_spectrum, fixed_budget };
 std::string to_string(StoppingRule rule);

@@ -1,16 +1,21 @@
-// The LibTorch training backend: the only translation unit of the module that includes LibTorch.
+// The LibTorch training backend, built as the plugin libdemcal_torch.so: the only translation unit
+// of the project that includes LibTorch. The smoothing module opens the plugin on first use
+// (torch_plugin.cpp), so commands that train no network never load LibTorch.
 //
 // All networks of a batch are stacked along a leading "curve" dimension and every layer is one
 // batched matrix product (bmm). Backpropagation is written out under NoGradGuard instead of using
 // autograd, and one flat parameter tensor gets a fused Adam update: this keeps the number of LibTorch
 // calls per epoch at about 60, whatever the batch size.
 #include "mlp_training.hpp"
+#include "torch_plugin_abi.hpp"
 
 #include <torch/torch.h>
 
 namespace demcal::smoothing::detail {
 
-TrainingOutput train_libtorch(const TrainingBatch& tb, const SmootherOptions& options) {
+namespace {
+
+TrainingOutput train_batched(const TrainingBatch& tb, const SmootherOptions& options) {
   torch::NoGradGuard no_grad;
   const int previous_threads = torch::get_num_threads();
   torch::set_num_threads(options.threads);
@@ -84,4 +89,24 @@ TrainingOutput train_libtorch(const TrainingBatch& tb, const SmootherOptions& op
   return selector.result();
 }
 
+}  // namespace
+
 }  // namespace demcal::smoothing::detail
+
+// The plugin's C entry points (torch_plugin_abi.hpp). Exceptions do not cross the boundary.
+extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_plugin_abi() { return demcal::smoothing::detail::kTorchPluginAbi; }
+
+extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_train(const demcal::smoothing::detail::TrainingBatch* batch,
+                                                        const demcal::smoothing::SmootherOptions* options,
+                                                        demcal::smoothing::detail::TrainingOutput* output,
+                                                        std::string* error) {
+  try {
+    *output = demcal::smoothing::detail::train_batched(*batch, *options);
+    return 0;
+  } catch (const std::exception& e) {
+    *error = e.what();
+  } catch (...) {
+    *error = "unknown exception";
+  }
+  return 1;
+}
