@@ -1,0 +1,75 @@
+// `demcal diagnose`: residual of a calibration -> the physical effect the model lacks -> the model
+// extended, with the error before and after (diagnose.hpp).
+#include "command_registry.hpp"
+
+#include "demcal/pipelines/campaign.hpp"
+#include "demcal/pipelines/diagnose.hpp"
+
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+namespace {
+
+struct DiagnoseFlags {
+  std::string campaign_file;
+  std::string out = "diagnosis";
+  std::string effects = "all";
+  std::string result;
+  long max_simulations = 0;
+  int candidates = 3;
+  int candidate_simulations = 0;
+  double evidence = 10;
+  bool resume = false, no_report = false, quiet = false;
+};
+
+std::vector<std::string> split_effects(const std::string& text) {
+  std::vector<std::string> names;
+  if (text == "all" || text.empty()) return names;
+  std::stringstream s(text);
+  for (std::string name; std::getline(s, name, ',');)
+    if (!name.empty()) names.push_back(name);
+  return names;
+}
+
+void run(const DiagnoseFlags& f) {
+  using namespace demcal::pipelines;
+  const CampaignConfig config = load_campaign(f.campaign_file);
+  DiagnoseOptions o;
+  o.output = f.out;
+  o.effects = split_effects(f.effects);
+  o.base_result = f.result;
+  o.max_simulations = f.max_simulations;
+  o.max_candidates = f.candidates;
+  o.candidate_evaluations = f.candidate_simulations;
+  o.evidence_threshold = f.evidence;
+  o.resume = f.resume;
+  o.report = !f.no_report;
+  o.progress = !f.quiet;
+  const Diagnosis d = run_diagnosis(config, o);
+  std::cout << d.verdict << "\n";
+  std::cout << "error before " << d.error_before << " N, after " << d.error_after << " N; " << d.simulations
+            << " simulations\n";
+  std::cout << "diagnosis: " << f.out << "/diagnosis.json\n";
+}
+
+void setup(CLI::App& app) {
+  auto flags = std::make_shared<DiagnoseFlags>();
+  auto* sub = app.add_subcommand("diagnose", "Trace a calibration's residual to the physical effect the model lacks");
+  sub->add_option("campaign", flags->campaign_file, "Campaign JSON file (as for calibrate)")->required()->check(CLI::ExistingFile);
+  sub->add_option("--out", flags->out, "Output folder (diagnosis.json, report.md, base/, candidates/)");
+  sub->add_option("--effects", flags->effects, "all, or effect names separated by commas (joint-closure,friction-softening,...)");
+  sub->add_option("--result", flags->result, "Reuse a finished base calibration (its folder or result.json)");
+  sub->add_option("--max-simulations", flags->max_simulations, "Budget of the whole diagnosis (0 = the campaign's per calibration)");
+  sub->add_option("--candidates", flags->candidates, "Effects calibrated at most, best signature first");
+  sub->add_option("--candidate-simulations", flags->candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");
+  sub->add_option("--evidence", flags->evidence, "Criterion fall needed to accept an effect");
+  sub->add_flag("--resume", flags->resume, "Continue interrupted calibrations from their archives");
+  sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");
+  sub->add_flag("--quiet", flags->quiet, "No progress lines");
+  sub->callback([flags] { run(*flags); });
+}
+
+}  // namespace
+
+DEMCAL_REGISTER_COMMAND("diagnose", setup);

@@ -1,0 +1,643 @@
+// The diagnosis loop (diagnose.hpp): base fit, residual, signatures, extended calibrations,
+// selection. Each stage is one function; run_diagnosis lists them.
+#include "demcal/pipelines/diagnose.hpp"
+
+#include "demcal/dem/effects.hpp"
+#include "demcal/pipelines/predict.hpp"
+#include "demcal/smoothing/objective.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);  // diagnose_report.cpp
+
+void DiagnoseOptions::Validate() const {
+  auto fail = [](const std::string& field, const std::string& value, const std::string& rule) {
+    throw CampaignError("diagnose option " + field + " = " + value + ": " + rule);
+  };
+  if (output.empty()) fail("output", "\"\"", "must name a folder");
+  if (max_simulations < 0) fail("max_simulations", std::to_string(max_simulations), "must be >= 0");
+  if (max_candidates < 1) fail("max_candidates", std::to_string(max_candidates), "must be >= 1");
+  if (candidate_evaluations < 0) fail("candidate_evaluations", std::to_string(candidate_evaluations), "must be >= 0");
+  if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
+  if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
+  if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
+  if (!(narrow_log_factor > 1)) fail("narrow_log_factor", std::to_string(narrow_log_factor), "must be > 1");
+  if (!(narrow_linear_share > 0 && narrow_linear_share <= 1))
+    fail("narrow_linear_share", std::to_string(narrow_linear_share), "must be in (0, 1]");
+  for (const auto& name : effects) {
+    try {
+      dem::find_effect(name);
+    } catch (const dem::SceneError& e) {
+      fail("effects", name, e.what());
+    }
+  }
+}
+
+namespace {
+
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+json params_json(const std::map<std::string, double>& params) {
+  json j = json::object();
+  for (const auto& [k, v] : params) j[k] = finite_or_null(v);
+  return j;
+}
+
+std::string key_of(const ChannelResidual& c) { return c.case_name + "/" + c.channel; }
+
+// RMS force error over every channel: sqrt of the mean of the per-channel mean squares.
+double overall_error(const std::vector<ChannelResidual>& residuals) {
+  if (residuals.empty()) return Diagnosis::kNaN;
+  double sum = 0;
+  for (const auto& c : residuals) sum += c.rms * c.rms;
+  return std::sqrt(sum / static_cast<double>(residuals.size()));
+}
+
+double overall_noise(const std::vector<ChannelResidual>& residuals) {
+  double sum = 0;
+  for (const auto& c : residuals) sum += c.noise * c.noise;
+  return std::sqrt(sum / static_cast<double>(std::max<std::size_t>(1, residuals.size())));
+}
+
+void progress(const DiagnoseOptions& o, const std::string& line) {
+  if (o.progress) std::cerr << "diagnose: " << line << std::endl;
+}
+
+// What one parameter set does to every case: the simulated curves and their residuals.
+struct Evaluation {
+  bool ok = false;
+  std::string message;
+  std::vector<CasePrediction> cases;
+  std::vector<ChannelResidual> residuals;  // per case and channel, on the base grid when one is given
+  double error = Diagnosis::kNaN;
+};
+
+class Stage {
+ public:
+  Stage(const CampaignConfig& config, const DiagnoseOptions& options) : config_(config), options_(options) {
+    for (const auto& c : config.cases) measured_.push_back(load_measured(c.measured));
+  }
+
+  // Simulates `params` on `config` (the base or an extended model). With `grid` (the base
+  // residuals) the residuals are taken on the same displacements, so fits compare point by point.
+  Evaluation evaluate(const CampaignConfig& config, const std::map<std::string, double>& params,
+                      const std::vector<ChannelResidual>* grid = nullptr) {
+    Evaluation e;
+    e.cases = predict_cases(config, params);
+    simulations_ += static_cast<long>(e.cases.size());
+    std::size_t g = 0;
+    for (std::size_t k = 0; k < e.cases.size(); ++k) {
+      const auto& p = e.cases[k];
+      if (!p.ok()) {
+        e.message = "case " + p.name + ": " + p.status + (p.message.empty() ? "" : " (" + p.message + ")");
+        return e;
+      }
+      const auto channels = smoothing::common_channels(measured_[k], p.simulated, config.objective_options);
+      for (const auto& ch : channels) {
+        const auto sim = smoothing::series(p.simulated, ch, config.objective_options.force_column);
+        ChannelResidual r;
+        if (grid) {
+          if (g >= grid->size()) {
+            e.message = "the model's channels differ from the base model's";
+            return e;
+          }
+          r = resimulated((*grid)[g++], sim);
+        } else {
+          r = analyse_channel(smoothing::series(measured_[k], ch, config.objective_options.force_column), sim,
+                              config.objective_options.points);
+        }
+        r.case_name = p.name;
+        r.channel = ch;
+        e.residuals.push_back(std::move(r));
+      }
+    }
+    e.ok = true;
+    e.error = overall_error(e.residuals);
+    return e;
+  }
+
+  long simulations() const { return simulations_; }
+  void add_simulations(long n) { simulations_ += n; }
+
+ private:
+  const CampaignConfig& config_;
+  const DiagnoseOptions& options_;
+  std::vector<smoothing::Curve> measured_;
+  long simulations_ = 0;
+};
+
+// Concatenated residual (or curve difference) over channels, each channel divided by its noise so
+// that channels of different precision weigh alike.
+std::vector<double> stacked(const std::vector<ChannelResidual>& base, const std::vector<ChannelResidual>* other) {
+  std::vector<double> v;
+  for (std::size_t c = 0; c < base.size(); ++c) {
+    const double scale = std::isfinite(base[c].noise) && base[c].noise > 0 ? 1 / base[c].noise : 1.0;
+    for (std::size_t i = 0; i < base[c].measured.size(); ++i)
+      v.push_back(scale * (other ? (*other)[c].simulated[i] - base[c].simulated[i]
+                                 : base[c].measured[i] - base[c].simulated[i]));
+  }
+  return v;
+}
+
+// ---- stage 1: the base fit ---------------------------------------------------------------------
+
+std::map<std::string, double> base_fit(const CampaignConfig& config, const DiagnoseOptions& options, Stage& stage,
+                                       double* fitness) {
+  if (!options.base_result.empty()) {
+    fs::path result = options.base_result;
+    if (fs::is_directory(result)) result /= "result.json";
+    progress(options, "base parameters from " + result.string());
+    const auto params = read_result_parameters(result.string());
+    std::ifstream in(result);
+    const json j = json::parse(in, nullptr, false);
+    *fitness = j.is_object() && j.contains("best") && j["best"].contains("fitness") && j["best"]["fitness"].is_number()
+                   ? j["best"]["fitness"].get<double>()
+                   : Diagnosis::kNaN;
+    return params;
+  }
+  CampaignConfig base = config;
+  base.output = (fs::path(options.output) / "base").string();
+  base.archive.clear();
+  base.report = options.report;
+  if (options.max_simulations > 0)
+    base.optimiser.max_evaluations = std::min(base.optimiser.evaluation_budget(), options.max_simulations / 2);
+  progress(options, "base calibration (" + std::to_string(base.optimiser.evaluation_budget()) + " simulations) in " +
+                        base.output);
+  RunOptions run;
+  run.resume = options.resume;
+  run.progress = options.progress;
+  const CampaignResult result = run_campaign(base, run);
+  stage.add_simulations(result.simulated_this_session);
+  if (result.status != CampaignStatus::completed || result.best.params.empty())
+    throw CampaignError("the base calibration failed: " + result.message);
+  *fitness = result.best.fitness;
+  return result.best.params;
+}
+
+// ---- stage 3: signatures -----------------------------------------------------------------------
+
+struct ExtendedModel {
+  CampaignConfig config;
+  std::vector<std::string> parameter_names;                   // set_parameter names of the effect
+  std::vector<const dem::EffectParameter*> parameters;       // registry entry of each name
+  std::string target;
+};
+
+const dem::EffectParameter* registry_parameter(const dem::Effect& effect, const std::string& name) {
+  const auto dot = name.rfind('.');
+  const std::string field = dot == std::string::npos ? name : name.substr(dot + 1);
+  for (const auto& p : effect.parameters)
+    if (p.name == field) return &p;
+  return nullptr;
+}
+
+// The base model with `effect` switched on for `targets` in every case's scene (written to folder).
+ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, const std::vector<std::string>& targets,
+                     const fs::path& folder) {
+  ExtendedModel m;
+  m.config = config;
+  m.target = targets.empty() ? "" : targets.front();
+  fs::create_directories(folder);
+  for (std::size_t k = 0; k < config.cases.size(); ++k) {
+    auto& c = m.config.cases[k];
+    dem::Scene scene = build_scene(c.scene, config.source + ": cases[" + std::to_string(k) + "].scene");
+    const auto names = dem::enable_effect(scene, effect.name, targets);
+    if (k == 0) {
+      m.parameter_names = names;
+    } else if (names != m.parameter_names) {
+      throw dem::SceneError(c.name, "effect " + effect.name + " has other parameters in this case than in the first");
+    }
+    const fs::path file = folder / ("scene-" + c.name + ".json");
+    dem::save_scene(scene, file.string());
+    c.scene = SceneSpec{};
+    c.scene.file = fs::absolute(file).string();
+  }
+  for (const auto& n : m.parameter_names) m.parameters.push_back(registry_parameter(effect, n));
+  return m;
+}
+
+// A parameter's value at fraction t of its search range (geometric for log-scaled ones).
+double at_fraction(const dem::EffectParameter& p, double t) {
+  if (p.log_scale && p.search_min > 0) return p.search_min * std::pow(p.search_max / p.search_min, t);
+  return p.search_min + t * (p.search_max - p.search_min);
+}
+
+// Upper bound of a residual friction: never above the base friction angle of the same group.
+double friction_cap(const std::string& name, const std::map<std::string, double>& base) {
+  if (name.find("friction_residual_deg") == std::string::npos) return std::numeric_limits<double>::infinity();
+  const auto dot = name.rfind('.');
+  const std::string group_key = dot == std::string::npos ? "friction_deg" : name.substr(0, dot) + ".friction_deg";
+  for (const auto& key : {group_key, std::string("friction_deg")})
+    if (auto it = base.find(key); it != base.end()) return it->second;
+  return std::numeric_limits<double>::infinity();
+}
+
+std::map<std::string, double> effect_values(const ExtendedModel& m, const std::map<std::string, double>& base,
+                                            double t) {
+  std::map<std::string, double> values = base;
+  for (std::size_t i = 0; i < m.parameter_names.size(); ++i)
+    if (m.parameters[i])
+      values[m.parameter_names[i]] = std::min(at_fraction(*m.parameters[i], t), friction_cap(m.parameter_names[i], base));
+  return values;
+}
+
+// Sensitivity of the stacked curves to each free base parameter: one forward difference of 5 % of
+// the unit cube (backwards at the upper bound).
+std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config, const std::map<std::string, double>& best,
+                                                    const std::vector<ChannelResidual>& base, Stage& stage) {
+  std::vector<std::vector<double>> columns;
+  const auto& space = config.space;
+  const auto names = space.free_names();
+  Eigen::VectorXd physical(static_cast<Eigen::Index>(names.size()));
+  for (std::size_t j = 0; j < names.size(); ++j) physical(static_cast<Eigen::Index>(j)) = best.at(names[j]);
+  const Eigen::VectorXd unit = space.to_unit(physical);
+  for (std::size_t j = 0; j < names.size(); ++j) {
+    Eigen::VectorXd u = unit;
+    const auto jj = static_cast<Eigen::Index>(j);
+    u(jj) += u(jj) + 0.05 <= 1 ? 0.05 : -0.05;
+    std::map<std::string, double> params = best;
+    params[names[j]] = space.to_physical(u)(jj);
+    const Evaluation e = stage.evaluate(config, complete_parameters(config, params), &base);
+    if (e.ok) columns.push_back(stacked(base, &e.residuals));
+  }
+  return columns;
+}
+
+// Candidate targets of an effect in this scene: joints for a gap (the base fit's hinges first,
+// then its sliding joints), else the effect's default.
+std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, const Evaluation& base) {
+  if (effect.target != dem::EffectTarget::joint) return {{}};
+  std::vector<std::vector<std::string>> out;
+  for (const char* key : {"hinges", "sliding_joints"})
+    for (const auto& c : base.cases)
+      if (c.details.contains(key) && c.details[key].is_array())
+        for (const auto& joint : c.details[key]) {
+          const std::vector<std::string> t{joint.get<std::string>()};
+          if (std::find(out.begin(), out.end(), t) == out.end() && out.size() < 4) out.push_back(t);
+        }
+  return out;
+}
+
+// ---- stage 4: extended calibration ------------------------------------------------------------
+
+CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
+                                 const std::map<std::string, double>& best, const DiagnoseOptions& options,
+                                 long evaluations, const fs::path& folder) {
+  CampaignConfig c = m.config;
+  optimise::ParameterSpace space;
+  for (const auto& p : config.space.free_parameters()) {
+    optimise::ParameterSpec s = p;
+    const double b = best.at(p.name);
+    if (p.scale == optimise::ParameterSpec::Scale::log10) {
+      s.lower = std::max(p.lower, b / options.narrow_log_factor);
+      s.upper = std::min(p.upper, b * options.narrow_log_factor);
+    } else {
+      const double half = options.narrow_linear_share * (p.upper - p.lower);
+      s.lower = std::max(p.lower, b - half);
+      s.upper = std::min(p.upper, b + half);
+    }
+    space.add(s);
+  }
+  for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
+    const auto* p = m.parameters[i];
+    if (!p) throw CampaignError("effect parameter " + m.parameter_names[i] + " is not in the effect registry");
+    optimise::ParameterSpec s;
+    s.name = m.parameter_names[i];
+    s.lower = p->search_min;
+    s.upper = std::min(p->search_max, friction_cap(s.name, best));
+    s.scale = p->log_scale ? optimise::ParameterSpec::Scale::log10 : optimise::ParameterSpec::Scale::linear;
+    if (!(s.upper > s.lower)) s.lower = s.upper - 0.5 * (p->search_max - p->search_min);
+    space.add(s);
+  }
+  for (const auto& [name, value] : config.space.fixed_parameters()) space.fix(name, value);
+  if (const auto& tied = config.space.tied_parameter()) space.tie(tied->name, tied->source, tied->ratio);
+  c.space = space;
+  c.name = config.name + "+" + m.config.name;
+  c.output = folder.string();
+  c.archive.clear();
+  c.report = options.report;
+  c.optimiser.max_evaluations = evaluations;
+  if (c.polish.enabled) c.polish.options.max_evaluations = std::min<long>(c.polish.options.max_evaluations, evaluations / 4);
+  return c;
+}
+
+std::string format_number(double v, int digits = 3) {
+  std::ostringstream s;
+  s.precision(digits);
+  s << v;
+  return s.str();
+}
+
+// The chosen effect's finding in a structural engineer's words, from its fitted parameters.
+std::string finding(const EffectCandidate& c, const std::map<std::string, double>& base) {
+  auto value = [&](const std::string& field, double* out) {
+    for (const auto& [k, v] : c.params) {
+      const auto dot = k.rfind('.');
+      if ((dot == std::string::npos ? k : k.substr(dot + 1)) == field && base.find(k) == base.end()) {
+        *out = v;
+        return true;
+      }
+    }
+    return false;
+  };
+  double a = 0, b = 0, d = 0;
+  std::ostringstream s;
+  if (c.effect == "joint-closure" && value("closure_max", &a)) {
+    s << "the joints are rough and close nonlinearly: they stiffen as they close, up to a maximum closure of about "
+      << format_number(a * 1e3) << " mm";
+  } else if (c.effect == "friction-softening" && value("friction_residual_deg", &a) && value("slip_softening", &b)) {
+    s << "friction is lost with sliding: it falls to about " << format_number(a) << "° over "
+      << format_number(b * 1e3) << " mm of slip";
+  } else if (c.effect == "cohesion" && value("cohesion", &a)) {
+    s << "the joints are bonded: a cohesion of about " << format_number(a / 1e3) << " kPa";
+    if (value("tensile_strength", &b)) s << " and a tensile strength of about " << format_number(b / 1e3) << " kPa";
+    s << " hold until the first failure of each joint";
+  } else if (c.effect == "crushing-cap" && value("compressive_strength", &a)) {
+    s << "the masonry crushes where the thrust concentrates (a hinge or the toe) at about " << format_number(a / 1e6)
+      << " MPa";
+    if (value("crushing_softening", &b)) s << ", losing its strength over " << format_number(b * 1e3) << " mm";
+  } else if (c.effect == "support-compliance") {
+    s << "the supports yield elastically instead of being rigid";
+    if (value("support_kx", &a)) s << ": horizontal stiffness about " << format_number(a / 1e6) << " MN/m (a 10 kN thrust moves it by about " << format_number(1e4 / a * 1e3) << " mm)";
+    if (value("support_ky", &b)) s << ", vertical about " << format_number(b / 1e6) << " MN/m";
+    if (value("support_kr", &d)) s << ", rotational about " << format_number(d / 1e3) << " kN·m/rad";
+  } else if (c.effect == "joint-gap" && value("gap_intrados", &a) && value("gap_extrados", &b)) {
+    s << "joint " << c.target << " was already open before loading: about " << format_number(a * 1e3)
+      << " mm at the intrados and " << format_number(b * 1e3) << " mm at the extrados (imperfect fit or lost mortar)";
+  } else if (c.effect == "boundary-restraint" && value("beam_kr", &a)) {
+    s << "the loading beam is neither fixed nor free in rotation: a rotational restraint of about "
+      << format_number(a / 1e3) << " kN·m/rad";
+  } else {
+    s << "effect " << c.effect;
+  }
+  return s.str();
+}
+
+// ---- stage 5: selection ------------------------------------------------------------------------
+
+void select(Diagnosis& d, const DiagnoseOptions& options) {
+  std::vector<EffectCandidate*> accepted;
+  for (auto& c : d.candidates) {
+    if (!c.tried) continue;
+    if (!std::isfinite(c.score)) {
+      c.verdict = "rejected";
+      if (c.reason.empty()) c.reason = "no usable fit";
+    } else if (c.score < -options.evidence_threshold && c.error < d.error_before) {
+      accepted.push_back(&c);
+    } else {
+      c.verdict = "rejected";
+      c.reason = "the fit does not improve enough for its extra parameters (criterion change " +
+                 format_number(c.score) + ", needs < -" + format_number(options.evidence_threshold) + ")";
+    }
+  }
+  std::sort(accepted.begin(), accepted.end(), [](auto* a, auto* b) { return a->score < b->score; });
+  std::vector<EffectCandidate*> tied;
+  for (auto* c : accepted) {
+    if (c->score - accepted.front()->score < options.tie_margin) {
+      tied.push_back(c);
+    } else {
+      c->verdict = "rejected";
+      c->reason = "explains the data clearly less well than " + accepted.front()->effect + " (criterion " +
+                  format_number(c->score) + " against " + format_number(accepted.front()->score) + ")";
+    }
+  }
+  const double noise = overall_noise(d.base_residuals);
+  if (tied.size() == 1) {
+    auto* c = tied.front();
+    c->verdict = "accepted";
+    c->reason = "criterion change " + format_number(c->score) + "; error " + format_number(d.error_before) + " -> " +
+                format_number(c->error) + " N";
+    d.chosen = {c->effect};
+    d.error_after = c->error;
+    d.verdict = "The base model misses one effect: " + finding(*c, d.base_params) + ". Adding " + c->effect +
+                " lowers the RMS force error from " + format_number(d.error_before) + " N to " +
+                format_number(c->error) + " N (measurement noise about " + format_number(noise) + " N).";
+  } else if (tied.size() > 1) {
+    std::string names;
+    for (auto* c : tied) {
+      c->verdict = "tied";
+      c->reason = "explains the data as well as the other tied effects (criteria within " +
+                  format_number(options.tie_margin) + ")";
+      names += (names.empty() ? "" : " or ") + c->effect;
+    }
+    d.chosen.clear();
+    d.error_after = d.error_before;
+    d.verdict = "The data cannot tell which effect is missing: " + names +
+                " explain the residual equally well. Another test (a further channel, or a test of the same structure) "
+                "is needed to choose; the model is not extended.";
+  } else {
+    d.chosen.clear();
+    d.error_after = d.error_before;
+    d.verdict = "No effect needed: none of the candidate effects explains the residual better than its extra "
+                "parameters cost (RMS force error " + format_number(d.error_before) + " N, noise about " +
+                format_number(noise) + " N).";
+  }
+}
+
+}  // namespace
+
+ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeries& simulated) {
+  ChannelResidual r = base;
+  const auto envelope = smoothing::loading_envelope(simulated);
+  if (envelope.x.size() < 2) throw smoothing::CurveError("a simulated curve has fewer than two loading points");
+  for (std::size_t i = 0; i < r.displacement.size(); ++i) r.simulated[i] = smoothing::interpolate(envelope, r.displacement[i]);
+  complete_residual(r);
+  return r;
+}
+
+Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  config.Validate();
+  options.Validate();
+  fs::create_directories(options.output);
+  Stage stage(config, options);
+  Diagnosis d;
+
+  // 1. base fit
+  d.base_params = base_fit(config, options, stage, &d.base_fitness);
+  const auto base_params = complete_parameters(config, d.base_params);
+
+  // 2. residual
+  const Evaluation base = stage.evaluate(config, base_params);
+  if (!base.ok) throw CampaignError("the base best set cannot be simulated: " + base.message);
+  d.base_residuals = base.residuals;
+  for (const auto& c : base.residuals) {
+    d.base_rms[key_of(c)] = c.rms;
+    d.noise[key_of(c)] = c.noise;
+  }
+  d.error_before = base.error;
+  const double noise = overall_noise(base.residuals);
+  progress(options, "base RMS force error " + format_number(d.error_before) + " N, noise " + format_number(noise) + " N");
+
+  std::vector<const dem::Effect*> effects;
+  if (options.effects.empty()) {
+    for (const auto& e : dem::effect_registry()) effects.push_back(&e);
+  } else {
+    for (const auto& n : options.effects) effects.push_back(&dem::find_effect(n));
+  }
+
+  const bool at_noise = d.error_before <= options.noise_level_ratio * noise;
+  if (at_noise) {
+    for (const auto* e : effects) {
+      EffectCandidate c;
+      c.effect = e->name;
+      c.reason = "the base fit is already at the noise level";
+      d.candidates.push_back(c);
+    }
+  } else {
+    // 3. signatures
+    const auto residual = stacked(base.residuals, nullptr);
+    const auto sensitivities = base_sensitivities(config, base_params, base.residuals, stage);
+    std::map<std::string, ExtendedModel> models;
+    for (const auto* e : effects) {
+      EffectCandidate best_target;
+      best_target.effect = e->name;
+      best_target.signature_score = -1;
+      for (const auto& targets : targets_for(*e, base)) {
+        EffectCandidate c;
+        c.effect = e->name;
+        c.target = targets.empty() ? "" : targets.front();
+        ExtendedModel m;
+        try {
+          m = extend(config, *e, targets, fs::path(options.output) / "candidates" / (e->name + (c.target.empty() ? "" : "@" + c.target)));
+        } catch (const std::exception& ex) {
+          c.reason = std::string("not applicable here: ") + ex.what();
+          c.signature_score = -1;
+          if (best_target.signature_score < 0 && best_target.reason.empty()) best_target = c;
+          continue;
+        }
+        for (double t : {0.3, 0.7}) {
+          const Evaluation s = stage.evaluate(m.config, effect_values(m, base_params, t), &base.residuals);
+          if (s.ok) c.signature_score = std::max(c.signature_score, signature_score(residual, sensitivities, stacked(base.residuals, &s.residuals)));
+        }
+        if (c.signature_score > best_target.signature_score) {
+          best_target = c;
+          models[e->name] = m;
+        }
+      }
+      if (best_target.signature_score < 0) {
+        best_target.signature_score = 0;
+        if (best_target.reason.empty()) best_target.reason = "no target for this effect in the scene";
+      }
+      progress(options, e->name + (best_target.target.empty() ? "" : " at " + best_target.target) +
+                            ": signature explains " + format_number(100 * best_target.signature_score, 2) +
+                            " % of the residual the base parameters cannot remove");
+      d.candidates.push_back(best_target);
+    }
+    std::stable_sort(d.candidates.begin(), d.candidates.end(),
+                     [](const auto& a, const auto& b) { return a.signature_score > b.signature_score; });
+
+    // 4. extended calibrations, best signature first, within the budget
+    const long per_candidate = options.candidate_evaluations > 0 ? options.candidate_evaluations
+                                                                  : config.optimiser.evaluation_budget();
+    int tried = 0;
+    for (auto& c : d.candidates) {
+      if (!models.count(c.effect)) continue;
+      if (tried >= options.max_candidates) {
+        c.reason = "ranked below the " + std::to_string(options.max_candidates) + " effects tried";
+        continue;
+      }
+      long budget = per_candidate;
+      if (options.max_simulations > 0) budget = std::min(budget, options.max_simulations - stage.simulations() - 1);
+      if (budget < 2 * config.optimiser.population) {
+        c.reason = "over the simulation budget";
+        continue;
+      }
+      const ExtendedModel& m = models.at(c.effect);
+      const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
+      const CampaignConfig ext = extended_campaign(m, config, d.base_params, options, budget, folder);
+      progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations) in " + folder.string());
+      ++tried;
+      c.tried = true;
+      RunOptions run;
+      run.resume = options.resume;
+      run.progress = options.progress;
+      try {
+        const CampaignResult r = run_campaign(ext, run);
+        stage.add_simulations(r.simulated_this_session);
+        c.simulations = r.simulated_this_session;
+        c.params = r.best.params;
+        c.fitness = r.best.fitness;
+        const Evaluation e = stage.evaluate(ext, complete_parameters(ext, r.best.params), &base.residuals);
+        if (!e.ok) {
+          c.reason = "its best set cannot be re-simulated: " + e.message;
+          continue;
+        }
+        c.residuals = e.residuals;
+        c.error = e.error;
+        for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
+        c.score = information_criterion_change(base.residuals, e.residuals, static_cast<int>(m.parameter_names.size()));
+      } catch (const std::exception& ex) {
+        c.reason = std::string("its calibration failed: ") + ex.what();
+      }
+    }
+  }
+
+  // 5. selection
+  if (at_noise) {
+    d.error_after = d.error_before;
+    d.verdict = "No effect needed: the base fit is already at the measurement noise (RMS force error " +
+                format_number(d.error_before) + " N, noise about " + format_number(noise) + " N).";
+  } else {
+    select(d, options);
+  }
+  d.simulations = stage.simulations();
+  d.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  {
+    std::ofstream out(fs::path(options.output) / "diagnosis.json");
+    out << d.to_json().dump(2) << "\n";
+    if (!out) throw CampaignError("cannot write " + (fs::path(options.output) / "diagnosis.json").string());
+  }
+  if (options.report) write_diagnosis_report(d, options);
+  progress(options, d.verdict);
+  return d;
+}
+
+json Diagnosis::to_json() const {
+  json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)}};
+  json residuals = json::array();
+  for (const auto& r : base_residuals) residuals.push_back(r.to_json());
+  base["residual"] = residuals;
+  json cands = json::array();
+  for (const auto& c : candidates) {
+    json rj = json::array();
+    for (const auto& r : c.residuals) rj.push_back(r.to_json());
+    cands.push_back({{"effect", c.effect},
+                     {"target", c.target},
+                     {"signature_score", c.signature_score},
+                     {"tried", c.tried},
+                     {"params", params_json(c.params)},
+                     {"fitness", finite_or_null(c.fitness)},
+                     {"rms", params_json(c.rms)},
+                     {"score", finite_or_null(c.score)},
+                     {"verdict", c.verdict},
+                     {"reason", c.reason},
+                     {"simulations", c.simulations},
+                     {"residual", rj}});
+    cands.back()["error"] = finite_or_null(c.error);
+  }
+  return {{"status", status},
+          {"message", message},
+          {"base", base},
+          {"noise", params_json(noise)},
+          {"candidates", cands},
+          {"chosen", chosen},
+          {"verdict", verdict},
+          {"error_before", finite_or_null(error_before)},
+          {"error_after", finite_or_null(error_after)},
+          {"simulations", simulations},
+          {"wall_time_s", wall_time_s}};
+}
+
+}  // namespace demcal::pipelines

@@ -1,0 +1,121 @@
+// report.md of a diagnosis: the verdict, the residual before and after (numbers and figures), and
+// the table of candidate effects.
+#include "demcal/pipelines/diagnose.hpp"
+#include "demcal/pipelines/report.hpp"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string num(double v, int digits = 3) {
+  if (!std::isfinite(v)) return "–";
+  std::ostringstream s;
+  s.precision(digits);
+  s << v;
+  return s.str();
+}
+
+std::string file_safe(std::string s) {
+  for (auto& ch : s)
+    if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '-' && ch != '_') ch = '_';
+  return s;
+}
+
+// Measured, base and extended curves of one channel, and the two residuals, as two stacked plots.
+std::string residual_figure(const ChannelResidual& base, const ChannelResidual* after, const std::string& after_label,
+                            const fs::path& figures, const std::string& stem) {
+  const fs::path data = figures / (stem + ".dat");
+  {
+    std::ofstream out(data);
+    out << "# displacement_mm measured_kN base_kN after_kN\n";
+    for (std::size_t i = 0; i < base.displacement.size(); ++i)
+      out << base.displacement[i] * 1e3 << " " << base.measured[i] / 1e3 << " " << base.simulated[i] / 1e3 << " "
+          << (after ? after->simulated[i] / 1e3 : base.simulated[i] / 1e3) << "\n";
+  }
+  std::ostringstream gp;
+  gp << "set multiplot layout 2,1 title '" << base.case_name << ": force against " << base.channel << "'\n"
+     << "set grid\nset xlabel 'displacement (mm)'\nset ylabel 'force (kN)'\nset key left top\n"
+     << "plot '" << data.string() << "' u 1:2 w p pt 7 ps 0.4 lc rgb '#888888' t 'measured', "
+     << "'' u 1:3 w l lw 2 lc rgb '#1f77b4' t 'base model'";
+  if (after) gp << ", '' u 1:4 w l lw 2 lc rgb '#d62728' t '" << after_label << "'";
+  gp << "\nset ylabel 'residual (kN)'\n"
+     << "plot '" << data.string() << "' u 1:($2-$3) w l lw 1.5 lc rgb '#1f77b4' t 'measured - base'";
+  if (after) gp << ", '' u 1:($2-$4) w l lw 1.5 lc rgb '#d62728' t 'measured - " << after_label << "'";
+  gp << ", " << base.noise / 1e3 << " w l dt 2 lc rgb '#444444' t '+/- noise', " << -base.noise / 1e3
+     << " w l dt 2 lc rgb '#444444' notitle\nunset multiplot\n";
+  const std::string png = stem + ".png";
+  const std::string error = run_gnuplot(gp.str(), (figures / png).string());
+  return error.empty() ? "![" + stem + "](figures/" + png + ")\n" : "(figure not drawn: " + error + ")\n";
+}
+
+}  // namespace
+
+void write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) {
+  const fs::path out_dir = options.output, figures = out_dir / "figures";
+  fs::create_directories(figures);
+  const EffectCandidate* after = nullptr;
+  for (const auto& c : d.candidates)
+    if (!d.chosen.empty() && c.effect == d.chosen.front()) after = &c;
+  if (!after)  // no choice: show the best-scoring calibrated candidate, for comparison
+    for (const auto& c : d.candidates)
+      if (c.tried && std::isfinite(c.score) && c.residuals.size() == d.base_residuals.size() &&
+          (!after || c.score < after->score))
+        after = &c;
+
+  std::ostringstream md;
+  md << "# Diagnosis\n\n**" << d.verdict << "**\n\n"
+     << "RMS force error over all channels: " << num(d.error_before) << " N before, " << num(d.error_after)
+     << " N after. Simulations: " << d.simulations << "; wall time " << num(d.wall_time_s) << " s.\n\n"
+     << "## Base fit\n\n| parameter | value |\n|---|---|\n";
+  for (const auto& [k, v] : d.base_params) md << "| " << k << " | " << num(v, 4) << " |\n";
+  md << "\n## Residual of the base fit (measured − simulated)\n\n"
+     << "Noise is estimated from each measured curve alone (local three-point pseudo-residuals, median "
+        "absolute deviation). A positive mean means the model is too weak there. Effective points: "
+        "n (1 − ρ) / (1 + ρ) with ρ the lag-1 autocorrelation of the residual.\n\n"
+     << "| case / channel | RMS (N) | noise (N) | RMS / noise | bias (N) | trend (N/mm) | initial mean (N) | "
+        "to peak mean (N) | after peak mean (N) | ρ | effective points |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& r : d.base_residuals) {
+    md << "| " << r.case_name << " / " << r.channel << " | " << num(r.rms) << " | " << num(r.noise) << " | "
+       << num(r.rms / r.noise) << " | " << num(r.bias) << " | " << num(r.trend / 1e3) << " | ";
+    for (const auto& g : r.regions) md << (g.points > 0 ? num(g.mean) : std::string("–")) << " | ";
+    md << num(r.autocorrelation) << " | " << num(r.effective_points) << " |\n";
+  }
+  md << "\n";
+  for (std::size_t i = 0; i < d.base_residuals.size(); ++i) {
+    const auto& r = d.base_residuals[i];
+    const ChannelResidual* a = after && i < after->residuals.size() ? &after->residuals[i] : nullptr;
+    md << residual_figure(r, a, a ? "base + " + after->effect : "", figures,
+                          "residual-" + file_safe(r.case_name + "-" + r.channel))
+       << "\n";
+  }
+  md << "## Candidate effects\n\n"
+     << "Signature: the share of the residual that the base parameters cannot remove and the effect's own "
+        "change of the curves can. Criterion: change of the information criterion against the base fit "
+        "(negative = better; accepted below −" << num(options.evidence_threshold) << ").\n\n"
+     << "| effect | target | signature | simulations | RMS error (N) | criterion | verdict | why |\n"
+        "|---|---|---|---|---|---|---|---|\n";
+  for (const auto& c : d.candidates)
+    md << "| " << c.effect << " | " << (c.target.empty() ? "–" : c.target) << " | " << num(c.signature_score, 2)
+       << " | " << c.simulations << " | " << num(c.error) << " | " << num(c.score) << " | " << c.verdict << " | "
+       << c.reason << " |\n";
+  md << "\n";
+  for (const auto& c : d.candidates) {
+    if (!c.tried || c.params.empty()) continue;
+    md << "### " << c.effect << ": best set\n\n| parameter | value |\n|---|---|\n";
+    for (const auto& [k, v] : c.params) md << "| " << k << " | " << num(v, 4) << " |\n";
+    md << "\n";
+  }
+  const fs::path path = out_dir / "report.md";
+  std::ofstream out(path);
+  out << md.str();
+  if (!out) throw CampaignError("cannot write " + path.string());
+}
+
+}  // namespace demcal::pipelines

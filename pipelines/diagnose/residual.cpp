@@ -1,0 +1,214 @@
+// Residual analysis and evidence of the diagnosis (diagnose.hpp): pure functions of curves.
+#include "demcal/pipelines/diagnose.hpp"
+#include "demcal/smoothing/objective.hpp"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace demcal::pipelines {
+
+using nlohmann::json;
+using smoothing::XYSeries;
+
+namespace {
+
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+double mean_of(const std::vector<double>& v) {
+  return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+}
+
+double median_of(std::vector<double> v) {
+  const std::size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(mid), v.end());
+  if (v.size() % 2) return v[mid];
+  const double upper = v[mid];
+  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + static_cast<long>(mid)));
+}
+
+ResidualRegion region(const std::string& name, const ChannelResidual& c, std::size_t from, std::size_t to) {
+  ResidualRegion r;
+  r.name = name;
+  if (from >= to) return r;
+  r.lower = c.displacement[from];
+  r.upper = c.displacement[to - 1];
+  r.points = static_cast<int>(to - from);
+  double sum = 0, squares = 0;
+  for (std::size_t i = from; i < to; ++i) {
+    const double e = c.measured[i] - c.simulated[i];
+    sum += e;
+    squares += e * e;
+  }
+  r.mean = sum / r.points;
+  r.rms = std::sqrt(squares / r.points);
+  return r;
+}
+
+}  // namespace
+
+std::vector<double> ChannelResidual::residual() const {
+  std::vector<double> r(measured.size());
+  for (std::size_t i = 0; i < r.size(); ++i) r[i] = measured[i] - simulated[i];
+  return r;
+}
+
+json ChannelResidual::to_json() const {
+  json regions_json = json::array();
+  for (const auto& r : regions)
+    regions_json.push_back({{"name", r.name}, {"lower", r.lower}, {"upper", r.upper}, {"points", r.points},
+                            {"mean", r.mean}, {"rms", r.rms}});
+  return {{"case", case_name},
+          {"channel", channel},
+          {"points", displacement.size()},
+          {"window", {displacement.empty() ? 0.0 : displacement.front(), displacement.empty() ? 0.0 : displacement.back()}},
+          {"noise", finite_or_null(noise)},
+          {"bias", bias},
+          {"trend", trend},
+          {"rms", rms},
+          {"rms_over_noise", finite_or_null(rms / noise)},
+          {"peak_displacement", peak_displacement},
+          {"regions", regions_json},
+          {"autocorrelation", autocorrelation},
+          {"effective_points", effective_points}};
+}
+
+double lag1_autocorrelation(const std::vector<double>& v) {
+  if (v.size() < 3) return 0;
+  const double m = mean_of(v);
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    den += (v[i] - m) * (v[i] - m);
+    if (i + 1 < v.size()) num += (v[i] - m) * (v[i + 1] - m);
+  }
+  return den > 0 ? num / den : 0.0;
+}
+
+double estimate_noise(const XYSeries& measured) {
+  const XYSeries e = smoothing::loading_envelope(measured);
+  if (e.x.size() < 3) return std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> pseudo;
+  pseudo.reserve(e.x.size() - 2);
+  for (std::size_t i = 1; i + 1 < e.x.size(); ++i) {
+    const double span = e.x[i + 1] - e.x[i - 1];
+    const double a = (e.x[i + 1] - e.x[i]) / span, b = (e.x[i] - e.x[i - 1]) / span;
+    pseudo.push_back(std::abs((a * e.y[i - 1] + b * e.y[i + 1] - e.y[i]) / std::sqrt(a * a + b * b + 1)));
+  }
+  return 1.4826 * median_of(pseudo);
+}
+
+void complete_residual(ChannelResidual& c) {
+  const std::size_t n = c.displacement.size();
+  if (n < 4 || c.measured.size() != n || c.simulated.size() != n)
+    throw smoothing::CurveError("residual analysis needs at least 4 grid points of measured and simulated force");
+
+  const std::vector<double> r = c.residual();
+  c.bias = mean_of(r);
+  double squares = 0;
+  for (double e : r) squares += e * e;
+  c.rms = std::sqrt(squares / static_cast<double>(n));
+  const double x_mean = mean_of(c.displacement);
+  double sxx = 0, sxy = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    sxx += (c.displacement[i] - x_mean) * (c.displacement[i] - x_mean);
+    sxy += (c.displacement[i] - x_mean) * (r[i] - c.bias);
+  }
+  c.trend = sxx > 0 ? sxy / sxx : 0.0;
+
+  // The measured peak on a lightly smoothed copy (5-point running mean), so one noisy sample does
+  // not move it; the initial branch ends where the curve first reaches half that peak.
+  std::vector<double> smooth(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t a = i >= 2 ? i - 2 : 0, b = std::min(n - 1, i + 2);
+    double sum = 0;
+    for (std::size_t k = a; k <= b; ++k) sum += c.measured[k];
+    smooth[i] = sum / static_cast<double>(b - a + 1);
+  }
+  const std::size_t peak = static_cast<std::size_t>(std::max_element(smooth.begin(), smooth.end()) - smooth.begin());
+  c.peak_displacement = c.displacement[peak];
+  std::size_t half = 0;
+  while (half < peak && smooth[half] < 0.5 * smooth[peak]) ++half;
+  c.regions = {region("initial", c, 0, half), region("to_peak", c, half, peak + 1), region("after_peak", c, peak + 1, n)};
+
+  c.autocorrelation = lag1_autocorrelation(r);
+  const double rho = std::max(0.0, c.autocorrelation);
+  c.effective_points = std::clamp(static_cast<double>(n) * (1 - rho) / (1 + rho), 1.0, static_cast<double>(n));
+}
+
+ChannelResidual analyse_channel(const XYSeries& measured, const XYSeries& simulated, int points) {
+  if (points < 4) throw smoothing::CurveError("residual analysis needs at least 4 grid points");
+  const XYSeries m = smoothing::loading_envelope(measured), s = smoothing::loading_envelope(simulated);
+  if (m.x.size() < 2 || s.x.size() < 2)
+    throw smoothing::CurveError("residual analysis: a curve has fewer than two loading points");
+  const double lower = std::max(m.x.front(), s.x.front()), upper = std::min(m.x.back(), s.x.back());
+  if (!(upper > lower))
+    throw smoothing::CurveError("residual analysis: the measured and simulated curves share no displacement window");
+
+  ChannelResidual c;
+  const auto n = static_cast<std::size_t>(points);
+  c.displacement.resize(n);
+  c.measured.resize(n);
+  c.simulated.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = lower + (upper - lower) * static_cast<double>(i) / static_cast<double>(n - 1);
+    c.displacement[i] = x;
+    c.measured[i] = smoothing::interpolate(m, x);
+    c.simulated[i] = smoothing::interpolate(s, x);
+  }
+  c.noise = estimate_noise(measured);
+  complete_residual(c);
+  return c;
+}
+
+double information_criterion_change(const std::vector<ChannelResidual>& base, const std::vector<ChannelResidual>& extended,
+                                    int extra_parameters) {
+  if (base.size() != extended.size() || base.empty())
+    throw std::invalid_argument("information criterion: base and extended fits must cover the same channels");
+  double change = 0, total_effective = 0;
+  for (std::size_t c = 0; c < base.size(); ++c) {
+    const double rss_base = base[c].rms * base[c].rms, rss_ext = extended[c].rms * extended[c].rms;
+    const double n_eff = extended[c].effective_points;
+    total_effective += n_eff;
+    // A perfect fit on either side would make the logarithm infinite: floor at a millionth of the other.
+    const double floor = 1e-12 * std::max(rss_base, rss_ext) + 1e-300;
+    change += n_eff * std::log(std::max(rss_ext, floor) / std::max(rss_base, floor));
+  }
+  return change + extra_parameters * std::log(std::max(total_effective, 1.0));
+}
+
+double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
+                       const std::vector<double>& signature) {
+  const auto n = static_cast<Eigen::Index>(residual.size());
+  if (static_cast<Eigen::Index>(signature.size()) != n)
+    throw std::invalid_argument("signature score: residual and signature differ in length");
+  const auto p = static_cast<Eigen::Index>(base_sensitivities.size());
+  Eigen::MatrixXd a(n, p + 1);
+  for (Eigen::Index j = 0; j < p; ++j) {
+    if (static_cast<Eigen::Index>(base_sensitivities[static_cast<std::size_t>(j)].size()) != n)
+      throw std::invalid_argument("signature score: a sensitivity differs in length from the residual");
+    a.col(j) = Eigen::Map<const Eigen::VectorXd>(base_sensitivities[static_cast<std::size_t>(j)].data(), n);
+  }
+  a.col(p) = Eigen::Map<const Eigen::VectorXd>(signature.data(), n);
+  const Eigen::Map<const Eigen::VectorXd> r(residual.data(), n);
+  if (!r.allFinite() || !a.allFinite()) return 0;
+
+  auto remaining = [&](const Eigen::MatrixXd& basis, Eigen::VectorXd* coefficients) {
+    if (basis.cols() == 0) {
+      if (coefficients) coefficients->resize(0);
+      return r.squaredNorm();
+    }
+    const Eigen::VectorXd x = basis.completeOrthogonalDecomposition().solve(r);
+    if (coefficients) *coefficients = x;
+    return (r - basis * x).squaredNorm();
+  };
+  const double without = remaining(a.leftCols(p), nullptr);
+  if (!(without > 0)) return 0;
+  Eigen::VectorXd x;
+  const double with = remaining(a, &x);
+  if (!(x(p) > 0)) return 0;
+  return std::clamp(1 - with / without, 0.0, 1.0);
+}
+
+}  // namespace demcal::pipelines

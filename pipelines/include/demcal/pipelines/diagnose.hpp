@@ -1,0 +1,179 @@
+// `demcal diagnose`: why a calibration fits badly, and which physical effect fixes it.
+//
+//   1. base fit      the campaign's own calibration (or a finished one, `--result`): best set B;
+//   2. residual      per case and channel, measured - simulated force on the objective's grid:
+//                    bias, trend, where along the curve it sits (initial branch, up to the peak,
+//                    after the peak) and with which sign, lag-1 autocorrelation, and the measurement
+//                    noise estimated from the measured curve alone;
+//   3. signatures    for every candidate effect (dem::effect_registry), the change of the simulated
+//                    curves when the effect is switched on at B (two magnitudes), and the base
+//                    parameters' own sensitivities (one finite difference each). An effect scores
+//                    by the share of the residual that the base parameters cannot remove and its
+//                    signature, with a non-negative weight, can: the ranking decides which effects
+//                    are calibrated at all when the budget is short, and in which order;
+//   4. extension     each tried effect: a calibration of the base parameters (bounds narrowed
+//                    around B) plus the effect's parameters, through run_campaign (archive,
+//                    backends, report), in <out>/candidates/<effect>/;
+//   5. selection     the change of an information criterion with the effective number of
+//                    independent points (the residual is autocorrelated): accepted when it falls
+//                    by more than `evidence_threshold`; "no effect needed" when none is accepted or
+//                    the base residual is already at the noise level; two accepted effects within
+//                    `tie_margin` of each other are "tied", and then none is chosen.
+//
+// Outputs: <out>/diagnosis.json (layout in docs/diagnose.md) and <out>/report.md with residual
+// plots before and after, the table of candidates and the verdict in words. Forces in N,
+// displacements in m, friction in degrees (as in campaigns).
+#pragma once
+
+#include "demcal/pipelines/campaign.hpp"
+#include "demcal/smoothing/curve.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <limits>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace demcal::pipelines {
+
+// ---- residual analysis -------------------------------------------------------------------------
+
+// One stretch of a channel's evaluation grid.
+struct ResidualRegion {
+  std::string name;   // "initial" (up to half the measured peak), "to_peak", "after_peak"
+  double lower = 0;   // m
+  double upper = 0;   // m
+  int points = 0;     // grid points inside (0: the curve has no such stretch)
+  double mean = 0;    // N, mean residual (measured - simulated): > 0 = the model is too weak there
+  double rms = 0;     // N
+};
+
+// The residual of one channel (force against one displacement) on the objective's grid: `points`
+// evenly spaced displacements over the window both loading envelopes share.
+struct ChannelResidual {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  std::string case_name;
+  std::string channel;                 // displacement column
+  std::vector<double> displacement;    // m
+  std::vector<double> measured;        // N, the raw measured envelope interpolated on the grid
+  std::vector<double> simulated;       // N
+  double noise = kNaN;                 // N, standard deviation of the measurement noise (estimate_noise)
+  double bias = 0;                     // N, mean residual
+  double trend = 0;                    // N/m, least-squares slope of the residual against displacement
+  double rms = 0;                      // N
+  double peak_displacement = 0;        // m, where the measured curve peaks on the grid
+  std::vector<ResidualRegion> regions; // initial, to_peak, after_peak
+  double autocorrelation = 0;          // lag-1 autocorrelation of the residual on the grid
+  double effective_points = 0;         // n (1 - rho) / (1 + rho), clamped to [1, n]
+
+  std::vector<double> residual() const;  // measured - simulated
+  nlohmann::json to_json() const;        // the numbers, not the arrays
+};
+
+// Residual of one channel; throws smoothing::CurveError when a series has fewer than two envelope
+// points or the two windows do not overlap.
+ChannelResidual analyse_channel(const smoothing::XYSeries& measured, const smoothing::XYSeries& simulated,
+                                int points);
+
+// Recomputes a residual's statistics (bias, trend, rms, regions, autocorrelation, effective
+// points) from its displacement, measured and simulated arrays; keeps its noise.
+void complete_residual(ChannelResidual& residual);
+
+// The grid, measured values and noise of `base` with another simulated curve interpolated on it
+// (clamped to its end values outside its range), so that two fits compare point by point.
+ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeries& simulated);
+
+// Standard deviation of the noise on a measured curve, from the data alone: the loading envelope's
+// local three-point pseudo-residuals (Gasser, Sroka and Jennen-Steinmetz 1986; exact for any
+// locally linear trend, valid for uneven spacing), scaled by 1.4826 x their median absolute value so
+// that isolated drops do not count. NaN when the envelope has fewer than three points.
+double estimate_noise(const smoothing::XYSeries& measured);
+
+// Lag-1 autocorrelation of a sequence about its mean (0 for fewer than 3 values or no variance).
+double lag1_autocorrelation(const std::vector<double>& values);
+
+// ---- evidence ---------------------------------------------------------------------------------
+
+// Change of the Bayesian information criterion from a base fit to an extended one, both measured on
+// the same channels: sum_c n_eff,c ln(RSS_ext,c / RSS_base,c) + extra_parameters ln(sum_c n_eff,c),
+// with each channel's effective points taken from the extended fit's residual. Negative = evidence
+// for the extension; below -10 is "very strong" on the usual scale (Kass and Raftery 1995).
+double information_criterion_change(const std::vector<ChannelResidual>& base,
+                                    const std::vector<ChannelResidual>& extended, int extra_parameters);
+
+// Share of the residual r that the base parameters' sensitivities J cannot remove and a signature s
+// can, with a non-negative weight: 1 - |r - P[J s] r|^2 / |r - P[J] r|^2, and 0 when the best weight
+// on s is negative (the effect pushes the curve the wrong way). All vectors of equal length.
+double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
+                       const std::vector<double>& signature);
+
+// ---- the loop ----------------------------------------------------------------------------------
+
+struct DiagnoseOptions {
+  std::string output = "diagnosis";       // folder: diagnosis.json, report.md, base/, candidates/
+  std::vector<std::string> effects;       // effect names to consider; empty = every registered effect
+  std::string base_result;                // a finished base calibration's folder (its result.json); "" = run one
+  long max_simulations = 0;               // budget of the whole diagnosis (base calibration included
+                                          // when it runs); 0 = the campaign's budget for the base and
+                                          // `candidate_evaluations` for each candidate
+  int max_candidates = 3;                 // effects calibrated at most, best signature first, >= 1
+  int candidate_evaluations = 0;          // simulations per candidate calibration; 0 = the campaign's
+  double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
+  double tie_margin = 6;                  // accepted effects closer than this are tied, >= 0
+  double noise_level_ratio = 1.25;        // base RMS / noise at or below this: nothing to explain, >= 1
+  // Base parameters in each candidate calibration: log-scaled ones within best x/÷ this factor,
+  // linear ones within best ± this share of their range (then clipped to the campaign's bounds).
+  double narrow_log_factor = 2.0;         // > 1
+  double narrow_linear_share = 0.15;      // in (0, 1]
+  bool resume = false;                    // continue the base and candidate campaigns from their archives
+  bool progress = true;                   // progress lines on stderr
+  bool report = true;                     // report.md with figures
+  void Validate() const;                  // throws CampaignError naming the field and value
+};
+
+struct EffectCandidate {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  std::string effect;                      // dem effect name
+  std::string target;                      // what it was switched on for ("" = the effect's default)
+  double signature_score = 0;              // in [0, 1], see signature_score()
+  bool tried = false;                      // calibrated (else ranked out or over budget)
+  std::map<std::string, double> params;    // best set of the extended calibration (base + effect)
+  double fitness = kNaN;                   // the campaign objective of that set
+  std::map<std::string, double> rms;       // "<case>/<channel>" -> RMS force error, N
+  double error = kNaN;                     // RMS force error over all channels, N
+  double score = kNaN;                     // information criterion change against the base (< 0 better)
+  std::string verdict = "not tried";       // "accepted" | "rejected" | "tied" | "not tried"
+  std::string reason;                      // one line: why this verdict
+  long simulations = 0;
+  std::vector<ChannelResidual> residuals;  // of the best extended set
+};
+
+struct Diagnosis {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  std::string status = "completed";        // "completed" | "failed"
+  std::string message;
+  std::map<std::string, double> base_params;
+  double base_fitness = kNaN;
+  std::map<std::string, double> base_rms;  // "<case>/<channel>" -> N
+  std::map<std::string, double> noise;     // "<case>/<channel>" -> N
+  std::vector<ChannelResidual> base_residuals;
+  std::vector<EffectCandidate> candidates; // signature order (best first)
+  std::vector<std::string> chosen;         // [] = no effect needed (or a tie)
+  std::string verdict;                     // the conclusion in words
+  double error_before = kNaN;              // RMS force error over all channels, N
+  double error_after = kNaN;
+  long simulations = 0;                    // the whole diagnosis (archived re-runs excluded)
+  double wall_time_s = 0;
+  nlohmann::json to_json() const;          // the diagnosis.json layout
+};
+
+// Runs the loop on a campaign (the same file `demcal calibrate` takes). Throws CampaignError for
+// bad input found before the first simulation; failed candidate calibrations become "rejected"
+// candidates with a reason, and the diagnosis goes on.
+Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& options);
+
+}  // namespace demcal::pipelines
