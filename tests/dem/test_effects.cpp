@@ -10,7 +10,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <numbers>
+#include <unistd.h>
 
 namespace {
 
@@ -421,6 +423,59 @@ TEST(EffectRegistry, EveryEffectSwitchesOnAndRunsTheReferenceArch) {
   EXPECT_EQ(get_parameter(s, "arch_joints.closure_max"), 0);
   EXPECT_THROW(enable_effect(s, "joint-gap"), SceneError);
   EXPECT_THROW(enable_effect(s, "support-compliance", {"voussoir_2"}), SceneError);
+}
+
+std::pair<int, std::string> run_demcal(const std::string& args) {
+  const std::string command = std::string(DEMCAL_BINARY) + " " + args + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  std::string output;
+  char buffer[4096];
+  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
+  const int status = pclose(pipe);
+  return {WEXITSTATUS(status), output};
+}
+
+TEST(EffectFlags, SceneCommandWritesEveryOption) {
+  const auto dir = std::filesystem::temp_directory_path() / ("demcal_effects_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string arch = (dir / "arch.json").string(), wall = (dir / "wall.json").string();
+  auto r = run_demcal("scene arch --closure-max 1e-4 --friction-residual-deg 20 --slip-softening 2e-3 --cohesion 1e4 "
+                      "--tensile-strength 5e3 --compressive-strength 2e7 --crushing-softening 1e-3 --support-kx 1e8 "
+                      "--support-kr 1e7 --support-blocks abutment_right --gap-joint voussoir_9/voussoir_10 "
+                      "--gap-extrados 1e-3 --beam-kr 1e6 -o " + arch);
+  ASSERT_EQ(r.first, 0) << r.second;
+  const Scene a = load_scene(arch);
+  for (const auto& group : {"arch_joints", "abutment_joints"}) {
+    const JointMaterial& m = a.joint_groups.at(group);
+    EXPECT_EQ(m.closure_max, 1e-4);
+    EXPECT_NEAR(m.friction_residual, 20 * kDeg, 1e-12);
+    EXPECT_EQ(m.slip_softening, 2e-3);
+    EXPECT_EQ(m.cohesion, 1e4);
+    EXPECT_EQ(m.tensile_strength, 5e3);
+    EXPECT_EQ(m.compressive_strength, 2e7);
+    EXPECT_EQ(m.crushing_softening, 1e-3);
+  }
+  EXPECT_EQ(a.blocks[a.block_index("abutment_right")].support_kx, 1e8);
+  EXPECT_EQ(a.blocks[a.block_index("abutment_right")].support_kr, 1e7);
+  EXPECT_EQ(a.blocks[a.block_index("abutment_left")].support_kx, 0);
+  EXPECT_EQ(a.joint_gap.joint, "voussoir_9/voussoir_10");
+  EXPECT_EQ(a.joint_gap.extrados, 1e-3);
+  EXPECT_EQ(a.blocks[a.block_index("voussoir_5")].beam_kr, 1e6);
+
+  r = run_demcal("scene wall --support-ky 1e9 --beam-kr 2e6 -o " + wall);
+  ASSERT_EQ(r.first, 0) << r.second;
+  const Scene w = load_scene(wall);
+  EXPECT_EQ(w.blocks[w.block_index("base")].support_ky, 1e9);
+  EXPECT_EQ(w.blocks[w.block_index("beam")].beam_kr, 2e6);
+
+  r = run_demcal("scene arch --friction-residual-deg 40 --slip-softening 1e-3 -o " + arch);
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.second.find("friction_residual_deg: must be in [0, friction_deg = 30.5] degrees, got 40"), std::string::npos)
+      << r.second;
+  r = run_demcal("scene arch --gap-extrados 1e-3 -o " + arch);
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.second.find("--gap-joint"), std::string::npos) << r.second;
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
