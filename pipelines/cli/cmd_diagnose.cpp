@@ -20,6 +20,7 @@ struct DiagnoseFlags {
   int candidates = 3;
   int candidate_simulations = 0;
   double evidence = 10;
+  std::string candidate_algorithm = "nlopt:LN_SBPLX";
   bool resume = false, no_report = false, quiet = false;
 };
 
@@ -43,6 +44,7 @@ void run(const DiagnoseFlags& f) {
   o.max_candidates = f.candidates;
   o.candidate_evaluations = f.candidate_simulations;
   o.evidence_threshold = f.evidence;
+  o.candidate_algorithm = f.candidate_algorithm;
   o.resume = f.resume;
   o.report = !f.no_report;
   o.progress = !f.quiet;
@@ -63,6 +65,8 @@ void setup(CLI::App& app) {
   sub->add_option("--max-simulations", flags->max_simulations, "Budget of the whole diagnosis (0 = the campaign's per calibration)");
   sub->add_option("--candidates", flags->candidates, "Effects calibrated at most, best signature first");
   sub->add_option("--candidate-simulations", flags->candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");
+  sub->add_option("--candidate-algorithm", flags->candidate_algorithm,
+                  "Optimiser of each candidate: nlopt:NAME (local, warm-started) or tbpso | pso | ga");
   sub->add_option("--evidence", flags->evidence, "Criterion fall needed to accept an effect");
   sub->add_flag("--resume", flags->resume, "Continue interrupted calibrations from their archives");
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");

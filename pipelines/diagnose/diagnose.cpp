@@ -32,9 +32,13 @@ void DiagnoseOptions::Validate() const {
   if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
-  if (!(narrow_log_factor > 1)) fail("narrow_log_factor", std::to_string(narrow_log_factor), "must be > 1");
-  if (!(narrow_linear_share > 0 && narrow_linear_share <= 1))
-    fail("narrow_linear_share", std::to_string(narrow_linear_share), "must be in (0, 1]");
+  if (candidate_algorithm.empty()) fail("candidate_algorithm", "\"\"", "must name an optimiser");
+  if (!(candidate_initial_step > 0 && candidate_initial_step <= 0.5))
+    fail("candidate_initial_step", std::to_string(candidate_initial_step), "must be in (0, 0.5]");
+  const bool wide = narrow_log_factor == 0 && narrow_linear_share == 0;
+  if (!wide && !(narrow_log_factor > 1)) fail("narrow_log_factor", std::to_string(narrow_log_factor), "must be > 1 (or 0 with narrow_linear_share 0)");
+  if (!wide && !(narrow_linear_share > 0 && narrow_linear_share <= 1))
+    fail("narrow_linear_share", std::to_string(narrow_linear_share), "must be in (0, 1] (or 0 with narrow_log_factor 0)");
   for (const auto& name : effects) {
     try {
       dem::find_effect(name);
@@ -105,6 +109,8 @@ class Stage {
       }
       const auto channels = smoothing::common_channels(measured_[k], p.simulated, config.objective_options);
       for (const auto& ch : channels) {
+        const auto weight = config.objective_options.channel_weights.find(ch);
+        if (weight != config.objective_options.channel_weights.end() && weight->second == 0) continue;  // not fitted
         const auto sim = smoothing::series(p.simulated, ch, config.objective_options.force_column);
         ChannelResidual r;
         if (grid) {
@@ -212,7 +218,18 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
   for (std::size_t k = 0; k < config.cases.size(); ++k) {
     auto& c = m.config.cases[k];
     dem::Scene scene = build_scene(c.scene, config.source + ": cases[" + std::to_string(k) + "].scene");
-    const auto names = dem::enable_effect(scene, effect.name, targets);
+    auto names = dem::enable_effect(scene, effect.name, targets);
+    // A joint-group effect switched on everywhere is calibrated with one value for every group
+    // (the name without its group), so that the search gains as few dimensions as the effect has.
+    if (effect.target == dem::EffectTarget::joint_groups) {
+      std::vector<std::string> fields;
+      for (const auto& n : names) {
+        const auto dot = n.rfind('.');
+        const std::string field = dot == std::string::npos ? n : n.substr(dot + 1);
+        if (std::find(fields.begin(), fields.end(), field) == fields.end()) fields.push_back(field);
+      }
+      names = fields;
+    }
     if (k == 0) {
       m.parameter_names = names;
     } else if (names != m.parameter_names) {
@@ -226,6 +243,9 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
   for (const auto& n : m.parameter_names) m.parameters.push_back(registry_parameter(effect, n));
   return m;
 }
+
+// Where in its search range each effect parameter is probed for the signature: from strong to mild.
+constexpr double kProbeFractions[] = {0.2, 0.5, 0.8};
 
 // A parameter's value at fraction t of its search range (geometric for log-scaled ones).
 double at_fraction(const dem::EffectParameter& p, double t) {
@@ -243,13 +263,28 @@ double friction_cap(const std::string& name, const std::map<std::string, double>
   return std::numeric_limits<double>::infinity();
 }
 
+// The effect's parameters at fractions t[i] of their search ranges, over the base set.
 std::map<std::string, double> effect_values(const ExtendedModel& m, const std::map<std::string, double>& base,
-                                            double t) {
+                                            const std::vector<double>& t) {
   std::map<std::string, double> values = base;
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i)
     if (m.parameters[i])
-      values[m.parameter_names[i]] = std::min(at_fraction(*m.parameters[i], t), friction_cap(m.parameter_names[i], base));
+      values[m.parameter_names[i]] = std::min(at_fraction(*m.parameters[i], t[i]), friction_cap(m.parameter_names[i], base));
   return values;
+}
+
+// Probe points of the signature: every parameter at mid-range, then each parameter alone at the
+// strong and mild ends of the probe range with the others at mid-range (one parameter: three
+// points along its range). 2P + 1 runs for P parameters.
+std::vector<std::vector<double>> probe_points(std::size_t parameters) {
+  std::vector<std::vector<double>> points{std::vector<double>(parameters, 0.5)};
+  for (std::size_t i = 0; i < parameters; ++i)
+    for (double t : {kProbeFractions[0], kProbeFractions[2]}) {
+      std::vector<double> p(parameters, 0.5);
+      p[i] = t;
+      points.push_back(p);
+    }
+  return points;
 }
 
 // Sensitivity of the stacked curves to each free base parameter: one forward difference of 5 % of
@@ -274,11 +309,17 @@ std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config
   return columns;
 }
 
-// Candidate targets of an effect in this scene: joints for a gap (the base fit's hinges first,
-// then its sliding joints), else the effect's default.
-std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, const Evaluation& base) {
-  if (effect.target != dem::EffectTarget::joint) return {{}};
+// Candidate targets of an effect in this scene: each fixed block for support springs; joints for
+// a gap (the base fit's hinges first, then its sliding joints); else the effect's default.
+std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, const Evaluation& base,
+                                                  const dem::Scene& scene) {
   std::vector<std::vector<std::string>> out;
+  if (effect.target == dem::EffectTarget::support_blocks) {
+    for (const auto& b : scene.blocks)
+      if (b.fixed) out.push_back({b.name});
+    return out;
+  }
+  if (effect.target != dem::EffectTarget::joint) return {{}};
   for (const char* key : {"hinges", "sliding_joints"})
     for (const auto& c : base.cases)
       if (c.details.contains(key) && c.details[key].is_array())
@@ -293,13 +334,16 @@ std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, con
 
 CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
                                  const std::map<std::string, double>& best, const DiagnoseOptions& options,
-                                 long evaluations, const fs::path& folder) {
+                                 long evaluations, const fs::path& folder, const std::map<std::string, double>& warm) {
   CampaignConfig c = m.config;
+  std::map<std::string, double> narrowed_lower;  // residual friction stays below the lowest friction searched
   optimise::ParameterSpace space;
   for (const auto& p : config.space.free_parameters()) {
     optimise::ParameterSpec s = p;
     const double b = best.at(p.name);
-    if (p.scale == optimise::ParameterSpec::Scale::log10) {
+    if (options.narrow_log_factor == 0 && options.narrow_linear_share == 0) {
+      // the campaign's own bounds
+    } else if (p.scale == optimise::ParameterSpec::Scale::log10) {
       s.lower = std::max(p.lower, b / options.narrow_log_factor);
       s.upper = std::min(p.upper, b * options.narrow_log_factor);
     } else {
@@ -307,6 +351,7 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
       s.lower = std::max(p.lower, b - half);
       s.upper = std::min(p.upper, b + half);
     }
+    narrowed_lower[s.name] = s.lower;
     space.add(s);
   }
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
@@ -315,7 +360,9 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
     optimise::ParameterSpec s;
     s.name = m.parameter_names[i];
     s.lower = p->search_min;
-    s.upper = std::min(p->search_max, friction_cap(s.name, best));
+    std::map<std::string, double> caps = best;
+    for (const auto& [name, lower] : narrowed_lower) caps[name] = lower;
+    s.upper = std::min(p->search_max, friction_cap(s.name, caps));
     s.scale = p->log_scale ? optimise::ParameterSpec::Scale::log10 : optimise::ParameterSpec::Scale::linear;
     if (!(s.upper > s.lower)) s.lower = s.upper - 0.5 * (p->search_max - p->search_min);
     space.add(s);
@@ -323,12 +370,27 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   for (const auto& [name, value] : config.space.fixed_parameters()) space.fix(name, value);
   if (const auto& tied = config.space.tied_parameter()) space.tie(tied->name, tied->source, tied->ratio);
   c.space = space;
-  c.name = config.name + "+" + m.config.name;
+  c.name = config.name + "+" + folder.filename().string();
   c.output = folder.string();
   c.archive.clear();
   c.report = options.report;
   c.optimiser.max_evaluations = evaluations;
-  if (c.polish.enabled) c.polish.options.max_evaluations = std::min<long>(c.polish.options.max_evaluations, evaluations / 4);
+  c.optimiser.algorithm = options.candidate_algorithm;
+  if (options.candidate_algorithm.rfind("nlopt:", 0) == 0) {
+    // Warm start: the base best with the effect at its best-explaining probe, clipped to the box.
+    const auto names = space.free_names();
+    const Eigen::VectorXd lower = space.lower_bounds(), upper = space.upper_bounds();
+    c.optimiser.initial_point.clear();
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      const auto it = warm.find(names[i]);
+      const double v = it != warm.end() ? it->second : best.at(names[i]);
+      c.optimiser.initial_point.push_back(std::clamp(v, lower(static_cast<Eigen::Index>(i)), upper(static_cast<Eigen::Index>(i))));
+    }
+    c.optimiser.initial_step = options.candidate_initial_step;
+    c.polish.enabled = false;
+  } else if (c.polish.enabled) {
+    c.polish.options.max_evaluations = std::min<long>(c.polish.options.max_evaluations, evaluations / 4);
+  }
   return c;
 }
 
@@ -464,8 +526,28 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   Stage stage(config, options);
   Diagnosis d;
 
-  // 1. base fit
+  // 1. base fit, then the same local search the candidates get, on the base parameters alone: an
+  // effect must beat the best the base model can do with that search, not a less refined fit.
   d.base_params = base_fit(config, options, stage, &d.base_fitness);
+  const long per_candidate = options.candidate_evaluations > 0 ? options.candidate_evaluations
+                                                                : config.optimiser.evaluation_budget();
+  {
+    ExtendedModel plain;
+    plain.config = config;
+    const fs::path folder = fs::path(options.output) / "base-refined";
+    const CampaignConfig refine = extended_campaign(plain, config, d.base_params, options, per_candidate, folder, d.base_params);
+    progress(options, "refining the base fit (" + std::to_string(per_candidate) + " simulations) in " + folder.string());
+    RunOptions run;
+    run.resume = options.resume;
+    run.progress = options.progress;
+    const CampaignResult r = run_campaign(refine, run);
+    stage.add_simulations(r.simulated_this_session);
+    if (r.status == CampaignStatus::completed && std::isfinite(r.best.fitness) &&
+        (!std::isfinite(d.base_fitness) || r.best.fitness < d.base_fitness)) {
+      d.base_params = r.best.params;
+      d.base_fitness = r.best.fitness;
+    }
+  }
   const auto base_params = complete_parameters(config, d.base_params);
 
   // 2. residual
@@ -500,11 +582,13 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     const auto residual = stacked(base.residuals, nullptr);
     const auto sensitivities = base_sensitivities(config, base_params, base.residuals, stage);
     std::map<std::string, ExtendedModel> models;
+    std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> best probe's parameters
+    const dem::Scene first_scene = build_scene(config.cases.front().scene, config.source + ": cases[0].scene");
     for (const auto* e : effects) {
       EffectCandidate best_target;
       best_target.effect = e->name;
       best_target.signature_score = -1;
-      for (const auto& targets : targets_for(*e, base)) {
+      for (const auto& targets : targets_for(*e, base, first_scene)) {
         EffectCandidate c;
         c.effect = e->name;
         c.target = targets.empty() ? "" : targets.front();
@@ -517,13 +601,25 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
           if (best_target.signature_score < 0 && best_target.reason.empty()) best_target = c;
           continue;
         }
-        for (double t : {0.3, 0.7}) {
-          const Evaluation s = stage.evaluate(m.config, effect_values(m, base_params, t), &base.residuals);
-          if (s.ok) c.signature_score = std::max(c.signature_score, signature_score(residual, sensitivities, stacked(base.residuals, &s.residuals)));
+        std::vector<std::vector<double>> signatures;
+        std::map<std::string, double> warm;  // the probe closest to the measurement starts the search
+        double warm_error = std::numeric_limits<double>::infinity();
+        for (const auto& t : probe_points(m.parameter_names.size())) {
+          const auto values = effect_values(m, base_params, t);
+          const Evaluation s = stage.evaluate(m.config, values, &base.residuals);
+          if (!s.ok) continue;
+          signatures.push_back(stacked(base.residuals, &s.residuals));
+          if (s.error < warm_error) {
+            warm_error = s.error;
+            warm = values;
+          }
         }
+        if (!signatures.empty()) c.signature_score = signature_score(residual, sensitivities, signatures);
+        if (signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
         if (c.signature_score > best_target.signature_score) {
           best_target = c;
           models[e->name] = m;
+          warm_starts[e->name] = warm;
         }
       }
       if (best_target.signature_score < 0) {
@@ -539,8 +635,6 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
                      [](const auto& a, const auto& b) { return a.signature_score > b.signature_score; });
 
     // 4. extended calibrations, best signature first, within the budget
-    const long per_candidate = options.candidate_evaluations > 0 ? options.candidate_evaluations
-                                                                  : config.optimiser.evaluation_budget();
     int tried = 0;
     for (auto& c : d.candidates) {
       if (!models.count(c.effect)) continue;
@@ -556,7 +650,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       }
       const ExtendedModel& m = models.at(c.effect);
       const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
-      const CampaignConfig ext = extended_campaign(m, config, d.base_params, options, budget, folder);
+      const CampaignConfig ext = extended_campaign(m, config, d.base_params, options, budget, folder, warm_starts[c.effect]);
       progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations) in " + folder.string());
       ++tried;
       c.tried = true;

@@ -179,36 +179,45 @@ double information_criterion_change(const std::vector<ChannelResidual>& base, co
 }
 
 double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
-                       const std::vector<double>& signature) {
+                       const std::vector<std::vector<double>>& signatures) {
   const auto n = static_cast<Eigen::Index>(residual.size());
-  if (static_cast<Eigen::Index>(signature.size()) != n)
-    throw std::invalid_argument("signature score: residual and signature differ in length");
-  const auto p = static_cast<Eigen::Index>(base_sensitivities.size());
-  Eigen::MatrixXd a(n, p + 1);
-  for (Eigen::Index j = 0; j < p; ++j) {
-    if (static_cast<Eigen::Index>(base_sensitivities[static_cast<std::size_t>(j)].size()) != n)
-      throw std::invalid_argument("signature score: a sensitivity differs in length from the residual");
-    a.col(j) = Eigen::Map<const Eigen::VectorXd>(base_sensitivities[static_cast<std::size_t>(j)].data(), n);
-  }
-  a.col(p) = Eigen::Map<const Eigen::VectorXd>(signature.data(), n);
-  const Eigen::Map<const Eigen::VectorXd> r(residual.data(), n);
-  if (!r.allFinite() || !a.allFinite()) return 0;
-
-  auto remaining = [&](const Eigen::MatrixXd& basis, Eigen::VectorXd* coefficients) {
-    if (basis.cols() == 0) {
-      if (coefficients) coefficients->resize(0);
-      return r.squaredNorm();
+  auto matrix = [&](const std::vector<std::vector<double>>& columns) {
+    Eigen::MatrixXd m(n, static_cast<Eigen::Index>(columns.size()));
+    for (std::size_t j = 0; j < columns.size(); ++j) {
+      if (static_cast<Eigen::Index>(columns[j].size()) != n)
+        throw std::invalid_argument("signature score: a column differs in length from the residual");
+      m.col(static_cast<Eigen::Index>(j)) = Eigen::Map<const Eigen::VectorXd>(columns[j].data(), n);
     }
-    const Eigen::VectorXd x = basis.completeOrthogonalDecomposition().solve(r);
-    if (coefficients) *coefficients = x;
-    return (r - basis * x).squaredNorm();
+    return m;
   };
-  const double without = remaining(a.leftCols(p), nullptr);
+  const Eigen::MatrixXd j = matrix(base_sensitivities), s = matrix(signatures);
+  Eigen::VectorXd r = Eigen::Map<const Eigen::VectorXd>(residual.data(), n);
+  if (!r.allFinite() || !j.allFinite() || !s.allFinite() || s.cols() == 0) return 0;
+
+  // What the base parameters cannot remove: residual and signatures with J's span projected out.
+  Eigen::MatrixXd s_left = s;
+  if (j.cols() > 0) {
+    const auto decomposition = j.completeOrthogonalDecomposition();
+    r -= j * decomposition.solve(r);
+    s_left -= j * decomposition.solve(s);
+  }
+  const double without = r.squaredNorm();
   if (!(without > 0)) return 0;
-  Eigen::VectorXd x;
-  const double with = remaining(a, &x);
-  if (!(x(p) > 0)) return 0;
-  return std::clamp(1 - with / without, 0.0, 1.0);
+  // Non-negative least squares by enumerating the subsets of the (few) signature columns.
+  const auto k = static_cast<int>(s_left.cols());
+  if (k > 12) throw std::invalid_argument("signature score: at most 12 signature columns");
+  double best = without;
+  for (int mask = 1; mask < (1 << k); ++mask) {
+    std::vector<Eigen::Index> picked;
+    for (int c = 0; c < k; ++c)
+      if (mask & (1 << c)) picked.push_back(c);
+    Eigen::MatrixXd a(n, static_cast<Eigen::Index>(picked.size()));
+    for (std::size_t c = 0; c < picked.size(); ++c) a.col(static_cast<Eigen::Index>(c)) = s_left.col(picked[c]);
+    const Eigen::VectorXd w = a.completeOrthogonalDecomposition().solve(r);
+    if ((w.array() < 0).any()) continue;  // an effect acts in one direction only
+    best = std::min(best, (r - a * w).squaredNorm());
+  }
+  return std::clamp(1 - best / without, 0.0, 1.0);
 }
 
 }  // namespace demcal::pipelines

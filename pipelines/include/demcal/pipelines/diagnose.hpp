@@ -12,8 +12,9 @@
 //                    signature, with a non-negative weight, can: the ranking decides which effects
 //                    are calibrated at all when the budget is short, and in which order;
 //   4. extension     each tried effect: a calibration of the base parameters (bounds narrowed
-//                    around B) plus the effect's parameters, through run_campaign (archive,
-//                    backends, report), in <out>/candidates/<effect>/;
+//                    around B, if asked) plus the effect's parameters, warm-started from B with the
+//                    effect at its probe closest to the measurement, through run_campaign (archive, backends, report), in
+//                    <out>/candidates/<effect>/;
 //   5. selection     the change of an information criterion with the effective number of
 //                    independent points (the residual is autocorrelated): accepted when it falls
 //                    by more than `evidence_threshold`; "no effect needed" when none is accepted or
@@ -103,11 +104,13 @@ double lag1_autocorrelation(const std::vector<double>& values);
 double information_criterion_change(const std::vector<ChannelResidual>& base,
                                     const std::vector<ChannelResidual>& extended, int extra_parameters);
 
-// Share of the residual r that the base parameters' sensitivities J cannot remove and a signature s
-// can, with a non-negative weight: 1 - |r - P[J s] r|^2 / |r - P[J] r|^2, and 0 when the best weight
-// on s is negative (the effect pushes the curve the wrong way). All vectors of equal length.
+// Share of the residual r that the base parameters' sensitivities J cannot remove and the effect's
+// signatures S (its curve changes at a few magnitudes) can, with non-negative weights on S (an
+// effect acts in one direction): 1 - min_{w >= 0} |r' - S' w|^2 / |r'|^2, where r' and S' are r and
+// S with J's span projected out. 0 when S pushes the curve only the wrong way. All vectors of one
+// length; at most 12 signatures.
 double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
-                       const std::vector<double>& signature);
+                       const std::vector<std::vector<double>>& signatures);
 
 // ---- the loop ----------------------------------------------------------------------------------
 
@@ -123,10 +126,18 @@ struct DiagnoseOptions {
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
   double tie_margin = 6;                  // accepted effects closer than this are tied, >= 0
   double noise_level_ratio = 1.25;        // base RMS / noise at or below this: nothing to explain, >= 1
-  // Base parameters in each candidate calibration: log-scaled ones within best x/÷ this factor,
-  // linear ones within best ± this share of their range (then clipped to the campaign's bounds).
-  double narrow_log_factor = 2.0;         // > 1
-  double narrow_linear_share = 0.15;      // in (0, 1]
+  // Base parameters in each candidate calibration: log-scaled ones within best x/÷ narrow_log_factor
+  // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range, then clipped to
+  // the campaign's bounds. Both 0 (the default): the campaign's own bounds, since base parameters
+  // that compensate for a missing effect can lie far from where the extended model needs them.
+  double narrow_log_factor = 0;
+  double narrow_linear_share = 0;
+  // Optimiser of each candidate calibration. An NLopt local algorithm ("nlopt:LN_SBPLX") starts
+  // from the base best with the effect at the probe closest to the measurement (a warm
+  // start; its first step `candidate_initial_step` in unit-cube lengths, in (0, 0.5]); a swarm
+  // ("tbpso", "pso", "ga") searches the narrowed box with the campaign's population and polish.
+  std::string candidate_algorithm = "nlopt:LN_SBPLX";
+  double candidate_initial_step = 0.1;
   bool resume = false;                    // continue the base and candidate campaigns from their archives
   bool progress = true;                   // progress lines on stderr
   bool report = true;                     // report.md with figures

@@ -1,0 +1,277 @@
+// The diagnosis: residual statistics against known answers, the evidence rule, and the whole loop
+// on engine-made measurements with an effect the diagnosis is not told (and a control without).
+#include "demcal/dem/effects.hpp"
+#include "demcal/dem/generators.hpp"
+#include "demcal/pipelines/backend.hpp"
+#include "demcal/pipelines/diagnose.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+using namespace demcal;
+using namespace demcal::pipelines;
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+namespace {
+
+double normal(std::mt19937_64& rng) {
+  auto uniform = [&] { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; };
+  const double u1 = uniform(), u2 = uniform();
+  return std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
+}
+
+// A softening curve: rises, peaks at x = 4 mm, falls.
+double curve_at(double x) { return 5000 * (x / 4e-3) * std::exp(1 - x / 4e-3); }
+
+smoothing::XYSeries sampled(int n, double noise, std::uint64_t seed, double (*f)(double) = curve_at) {
+  std::mt19937_64 rng(seed);
+  smoothing::XYSeries s;
+  for (int i = 0; i < n; ++i) {
+    const double x = 12e-3 * i / (n - 1);
+    s.x.push_back(x);
+    s.y.push_back(f(x) + noise * normal(rng));
+  }
+  return s;
+}
+
+}  // namespace
+
+TEST(Residual, NoiseEstimateRecoversTheNoiseOfACurvedMeasurement) {
+  for (double sigma : {5.0, 50.0}) {
+    const double estimate = estimate_noise(sampled(1200, sigma, 7));
+    EXPECT_NEAR(estimate, sigma, 0.08 * sigma) << "sigma " << sigma;  // 1200 points: MAD's spread ~3 %
+  }
+  EXPECT_LT(estimate_noise(sampled(1200, 0, 7)), 0.5);  // the trend alone is not noise
+}
+
+TEST(Residual, AutocorrelationOfWhiteAndOfCorrelatedSequences) {
+  std::mt19937_64 rng(3);
+  std::vector<double> white(4000), ar(4000);
+  double previous = 0;
+  for (std::size_t i = 0; i < white.size(); ++i) {
+    white[i] = normal(rng);
+    previous = 0.8 * previous + normal(rng);
+    ar[i] = previous;
+  }
+  EXPECT_NEAR(lag1_autocorrelation(white), 0.0, 0.05);  // 3 standard errors at n = 4000
+  EXPECT_NEAR(lag1_autocorrelation(ar), 0.8, 0.05);
+}
+
+TEST(Residual, BiasTrendRegionsAndEffectivePoints) {
+  const auto measured = sampled(1200, 0, 1);
+  smoothing::XYSeries simulated = measured;
+  for (auto& y : simulated.y) y -= 100;  // the model is 100 N too weak everywhere
+  const ChannelResidual r = analyse_channel(measured, simulated, 200);
+  EXPECT_NEAR(r.bias, 100, 1e-9);
+  EXPECT_NEAR(r.trend, 0, 1e-6);
+  EXPECT_NEAR(r.rms, 100, 1e-9);
+  EXPECT_NEAR(r.peak_displacement, 4e-3, 12e-3 / 199);
+  ASSERT_EQ(r.regions.size(), 3u);
+  EXPECT_EQ(r.regions[0].name, "initial");
+  EXPECT_GT(r.regions[0].points, 0);
+  EXPECT_GT(r.regions[2].points, 0);
+  for (const auto& g : r.regions) EXPECT_NEAR(g.mean, 100, 1e-9) << g.name;
+  // A softening the model misses: residual only after the peak, negative there.
+  smoothing::XYSeries stiff = measured;
+  for (std::size_t i = 0; i < stiff.x.size(); ++i)
+    if (stiff.x[i] > 4e-3) stiff.y[i] += 2000 * (stiff.x[i] - 4e-3) / 8e-3;
+  const ChannelResidual s = analyse_channel(measured, stiff, 200);
+  EXPECT_NEAR(s.regions[0].mean, 0, 1e-9);
+  EXPECT_LT(s.regions[2].mean, -500);
+  EXPECT_LT(s.trend, 0);
+  EXPECT_GT(s.autocorrelation, 0.9);  // a smooth residual: few independent points
+  EXPECT_LT(s.effective_points, 10);
+}
+
+TEST(Evidence, InformationCriterionRewardsStructureAndPenalisesParameters) {
+  const auto measured = sampled(1200, 20, 11);
+  auto model = [&](double amplitude) {
+    smoothing::XYSeries s = sampled(1200, 0, 0);
+    for (std::size_t i = 0; i < s.x.size(); ++i) s.y[i] += amplitude * std::sin(s.x[i] / 12e-3 * 2 * M_PI);
+    return analyse_channel(measured, s, 200);
+  };
+  const ChannelResidual structured = model(200), right = model(0);
+  EXPECT_LT(information_criterion_change({structured}, {right}, 2), -100);
+  EXPECT_GT(information_criterion_change({right}, {right}, 2), 0);  // nothing gained: the parameters cost
+  const ChannelResidual almost = model(2);  // 1 % of the structure: not worth two parameters
+  EXPECT_GT(information_criterion_change({almost}, {right}, 2), 0);
+}
+
+TEST(Evidence, SignatureScoreNeedsTheRightShapeAndSign) {
+  const int n = 300;
+  std::vector<double> j1(n), s(n), other(n), residual(n), wrong(n);
+  std::mt19937_64 rng(5);
+  for (int i = 0; i < n; ++i) {
+    const double x = static_cast<double>(i) / (n - 1);
+    j1[i] = x;                                      // what a base parameter can do
+    s[i] = std::max(0.0, x - 0.5);                  // the effect: only after mid-curve
+    other[i] = std::sin(9 * x);                     // an unrelated shape
+    const double e = 0.01 * normal(rng);
+    residual[i] = 0.3 * j1[i] + 2 * s[i] + e;
+    wrong[i] = 0.3 * j1[i] - 2 * s[i] + e;
+  }
+  EXPECT_GT(signature_score(residual, {j1}, {s}), 0.95);
+  EXPECT_EQ(signature_score(wrong, {j1}, {s}), 0.0);  // the effect pushes the other way
+  EXPECT_LT(signature_score(residual, {j1}, {other}), 0.5);
+  EXPECT_EQ(signature_score(j1, {j1}, {s}), 0.0);       // nothing left for the effect to explain
+}
+
+TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
+  DiagnoseOptions o;
+  o.effects = {"joint-closure", "moss"};
+  try {
+    o.Validate();
+    FAIL() << "an unknown effect was accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_NE(std::string(e.what()).find("moss"), std::string::npos) << e.what();
+  }
+  o.effects.clear();
+  o.max_candidates = 0;
+  EXPECT_THROW(o.Validate(), CampaignError);
+}
+
+// ---- the loop on engine-made data -------------------------------------------------------------
+
+namespace {
+
+// The reduced loop of docs/diagnose.md: a coarse reference arch (5 points per joint) at 5 mm/s to
+// 8 mm, measured with parameters the diagnosis is not told (set on the default scene, as a
+// calibration sets them), 1.5 % of the peak force as noise on the force, calibrated with
+// objective 1 on the load-point channel (the abutment channel weighs 0: see docs/diagnose.md).
+dem::ArchOptions test_arch() {
+  dem::ArchOptions o;
+  o.contacts_per_joint = 5;
+  o.velocity = 0.005;
+  o.max_displacement = 0.008;
+  return o;
+}
+
+struct Truth {
+  std::string effect;                          // "" = the control
+  std::vector<std::string> targets;
+  std::map<std::string, double> effect_params; // set_parameter names
+};
+
+fs::path make_measurement(const Truth& truth, const fs::path& dir, std::uint64_t seed) {
+  dem::Scene scene = dem::make_arch(test_arch());
+  if (!truth.effect.empty()) dem::enable_effect(scene, truth.effect, truth.targets);
+  std::map<std::string, double> params = {{"kn", 2.6e9}, {"ks", 0.9e9}, {"friction_deg", 32.3}};
+  params.insert(truth.effect_params.begin(), truth.effect_params.end());
+  const SimulationOutcome run = simulate_with_parameters(scene, params);
+  EXPECT_EQ(run.status, "completed") << run.message;
+  const auto& f = run.curves.column("force").values;
+  const double peak = *std::max_element(f.begin(), f.end());
+  std::mt19937_64 rng(seed);
+  smoothing::Curve m;
+  for (const char* name : {"load_vertical", "abutment_horizontal", "force"}) m.columns.push_back({name, "", {}});
+  for (std::size_t i = 0; i < run.curves.rows(); i += 5) {
+    m.columns[0].values.push_back(run.curves.column("load_vertical").values[i]);
+    m.columns[1].values.push_back(run.curves.column("abutment_horizontal").values[i]);
+    m.columns[2].values.push_back(f[i] + 0.015 * peak * normal(rng));
+  }
+  const fs::path file = dir / "measured.csv";
+  smoothing::write_curve(m, file.string());
+  return file;
+}
+
+CampaignConfig campaign(const fs::path& measured, const fs::path& dir) {
+  const json options = {{"contacts_per_joint", 5}, {"velocity", 0.005}, {"max_displacement", 0.008}};
+  const json j = {
+      {"name", "diagnose-test"},
+      {"scene", {{"generator", "arch"}, {"options", options}}},
+      {"measured", measured.string()},
+      {"parameters", {{{"name", "kn"}, {"lower", 1e8}, {"upper", 1e10}, {"scale", "log10"}},
+                      {{"name", "ks"}, {"lower", 1e8}, {"upper", 1e10}, {"scale", "log10"}},
+                      {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+      {"objective", {{"type", 1}, {"weights", {{"abutment_horizontal", 0}}}}},
+      {"optimiser", {{"algorithm", "tbpso"}, {"population", 10}, {"iterations", 6}, {"seed", 1}}},
+      {"polish", {{"algorithm", "LN_SBPLX"}, {"max_evaluations", 20}}},
+      {"output", (dir / "unused").string()},
+      {"report", false}};
+  return campaign_from_json(j, dir.string(), "diagnose-test.json");
+}
+
+Diagnosis diagnose(const Truth& truth, const fs::path& dir) {
+  const fs::path measured = make_measurement(truth, dir, 1);
+  DiagnoseOptions o;
+  o.output = (dir / "out").string();
+  o.effects = {"support-compliance", "friction-softening"};
+  o.candidate_evaluations = 60;
+  o.progress = false;
+  return run_diagnosis(campaign(measured, dir), o);
+}
+
+}  // namespace
+
+TEST(DiagnoseLoop, ControlNeedsNoEffect) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "control");
+  const Diagnosis d = diagnose({}, dir);
+  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
+  EXPECT_EQ(d.error_after, d.error_before);
+  EXPECT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
+  for (const auto& c : d.candidates) EXPECT_NE(c.verdict, "accepted") << c.effect;
+}
+
+// The loop's mechanics on a measurement with soft springs under the right abutment: both effects
+// are probed and ranked, the ranked ones calibrated through the campaign machinery (each with its
+// archive), their fits re-simulated on the base grid, judged, and reported. Whether the effect is
+// named depends on the extended calibration reaching the truth, which it does not yet at this
+// budget (docs/diagnose.md, "Measured so far"): that is not asserted here.
+TEST(DiagnoseLoop, EveryCandidateIsProbedCalibratedJudgedAndReported) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "support");
+  const Diagnosis d = diagnose({"support-compliance", {"abutment_right"},
+                                {{"abutment_right.support_kx", 5e6}, {"abutment_right.support_ky", 1e9},
+                                 {"abutment_right.support_kr", 1e9}}},
+                               dir);
+  EXPECT_GT(d.error_before, 1.25 * std::sqrt(d.noise.begin()->second * d.noise.begin()->second));
+  ASSERT_EQ(d.candidates.size(), 2u);
+  EXPECT_GE(d.candidates[0].signature_score, d.candidates[1].signature_score);  // ranked
+  for (const auto& c : d.candidates) {
+    EXPECT_TRUE(c.tried) << c.effect << ": " << c.reason;
+    EXPECT_TRUE(std::isfinite(c.score)) << c.effect << ": " << c.reason;
+    EXPECT_TRUE(c.verdict == "accepted" || c.verdict == "rejected" || c.verdict == "tied") << c.verdict;
+    EXPECT_FALSE(c.reason.empty());
+    EXPECT_EQ(c.residuals.size(), d.base_residuals.size());
+    EXPECT_TRUE(fs::exists(dir / "out" / "candidates" / c.effect / "archive.sqlite")) << c.effect;
+    // the effect's parameters were calibrated alongside the base ones
+    EXPECT_GT(c.params.size(), d.base_params.size()) << c.effect;
+  }
+  EXPECT_LE(d.error_after, d.error_before);
+  const json j = test_support::read_json(dir / "out" / "diagnosis.json");
+  for (const char* key : {"base", "noise", "candidates", "chosen", "error_before", "error_after"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  EXPECT_EQ(j["candidates"].size(), 2u);
+  EXPECT_TRUE(fs::exists(dir / "out" / "report.md"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "base" / "archive.sqlite"));
+}
+
+TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
+  // Bad input first: an unknown effect is named in the message, before any simulation.
+  const fs::path dir = test_support::fresh_dir("diagnose", "cli");
+  const fs::path measured = make_measurement({}, dir, 2);
+  json j = {{"name", "cli"},
+            {"scene", {{"generator", "arch"}, {"options", {{"contacts_per_joint", 5}, {"velocity", 0.005}, {"max_displacement", 0.008}}}}},
+            {"measured", measured.string()},
+            {"parameters", {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+            {"fixed", {{"kn", 2.6e9}, {"ks", 0.9e9}}},
+            {"objective", {{"type", 1}, {"weights", {{"abutment_horizontal", 0}}}}},
+            {"optimiser", {{"algorithm", "tbpso"}, {"population", 4}, {"iterations", 3}, {"seed", 1}}},
+            {"report", false}};
+  std::ofstream(dir / "campaign.json") << j.dump(2);
+  const std::string base = std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " +
+                           (dir / "out").string() + " --quiet";
+  FILE* pipe = popen((base + " --effects moss 2>&1").c_str(), "r");
+  std::string text;
+  char buf[512];
+  while (fgets(buf, sizeof buf, pipe)) text += buf;
+  EXPECT_NE(pclose(pipe), 0);
+  EXPECT_NE(text.find("moss"), std::string::npos) << text;
+  ASSERT_EQ(std::system((base + " --effects support-compliance --candidates 1 --candidate-simulations 8 > /dev/null 2>&1").c_str()), 0);
+  const json d = test_support::read_json(dir / "out" / "diagnosis.json");
+  EXPECT_TRUE(d["chosen"].is_array());
+  EXPECT_TRUE(d["error_before"].is_number());
+}
