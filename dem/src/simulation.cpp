@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 #include <unordered_map>
 
 namespace demcal::dem {
@@ -457,34 +458,53 @@ void Engine::process_pair(int ia, int ib) {
   // The pair's resultant: force on b and its moment about the origin, applied once at the end.
   Vec2 resultant = Vec2::Zero();
   double moment = 0;
-  for (int k = 0; k < count; ++k) {
-    // Nodes are stored in the order of increasing coordinate along tangent_ab.
-    const int slot = ref_on_a ? k : count - 1 - k;
-    double gap = gaps[k];
-    const Vec2 point = r1 + s_nodes[k] * tr + 0.5 * gap * normal;
-    if (gap_joint) {
-      const double t = std::clamp((point - gap_from).dot(gap_along) / gap_along.squaredNorm(), 0.0, 1.0);
-      gap += scene_.joint_gap.intrados + t * (scene_.joint_gap.extrados - scene_.joint_gap.intrados);
+  // The node loop, compiled twice: the plain law (every joint without effects, kept exactly as the
+  // engine was before the effects) and the general one (effects on, or the gap joint).
+  const auto node_loop = [&](auto plain_tag) {
+    constexpr bool kPlain = decltype(plain_tag)::value;
+    for (int k = 0; k < count; ++k) {
+      // Nodes are stored in the order of increasing coordinate along tangent_ab.
+      const int slot = ref_on_a ? k : count - 1 - k;
+      double gap = gaps[k];
+      const Vec2 point = r1 + s_nodes[k] * tr + 0.5 * gap * normal;
+      NodeForces f;
+      if constexpr (kPlain) {
+        contact.gap[slot] = gap;
+        NodeKinematics kin;
+        kin.penetration = -gap;
+        kin.area = lengths[k] * scene_.width;
+        if (kin.penetration > 0) kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(tangent_ab) * dt_;
+        f = law.evaluate(kin, contact.shear[slot]);
+      } else {
+        if (gap_joint) {
+          const double t = std::clamp((point - gap_from).dot(gap_along) / gap_along.squaredNorm(), 0.0, 1.0);
+          gap += scene_.joint_gap.intrados + t * (scene_.joint_gap.extrados - scene_.joint_gap.intrados);
+        }
+        contact.gap[slot] = gap;
+        // A bond exists only where the faces touch at the start (within 1 um).
+        if (first_step_ && !plain) contact.history[slot].bonded = group.effects.bonds() && gap <= 1e-6;
+        NodeKinematics kin;
+        kin.penetration = -gap;
+        kin.area = lengths[k] * scene_.width;
+        if (kin.penetration > 0 || (!plain && contact.history[slot].bonded))
+          kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(tangent_ab) * dt_;
+        f = plain ? law.evaluate(kin, contact.shear[slot])
+                  : group.effects.evaluate(kin, contact.shear[slot], contact.history[slot]);
+      }
+      ++node_updates_;
+      if (f.normal == 0) continue;
+      touching = true;
+      const Vec2 force_on_b = f.normal * normal_ab + f.shear * tangent_ab;
+      resultant += force_on_b;
+      moment += cross(point, force_on_b);
+      slip_weighted += f.plastic_slip * lengths[k];
+      length_total += lengths[k];
     }
-    contact.gap[slot] = gap;
-    // A bond exists only where the faces touch at the start (within 1 um).
-    if (first_step_ && !plain) contact.history[slot].bonded = group.effects.bonds() && gap <= 1e-6;
-    NodeKinematics kin;
-    kin.penetration = -gap;
-    kin.area = lengths[k] * scene_.width;
-    if (kin.penetration > 0 || (!plain && contact.history[slot].bonded))
-      kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(tangent_ab) * dt_;
-    const NodeForces f =
-        plain ? law.evaluate(kin, contact.shear[slot]) : group.effects.evaluate(kin, contact.shear[slot], contact.history[slot]);
-    ++node_updates_;
-    if (f.normal == 0) continue;
-    touching = true;
-    const Vec2 force_on_b = f.normal * normal_ab + f.shear * tangent_ab;
-    resultant += force_on_b;
-    moment += cross(point, force_on_b);
-    slip_weighted += f.plastic_slip * lengths[k];
-    length_total += lengths[k];
-  }
+  };
+  if (plain && !gap_joint)
+    node_loop(std::true_type{});
+  else
+    node_loop(std::false_type{});
   if (touching) {
     b.force += resultant;
     b.torque += moment - cross(b.position, resultant);
