@@ -448,20 +448,24 @@ void Engine::process_pair(int ia, int ib) {
   const MohrCoulombLaw& law = group.law;
   const bool plain = group.plain;
   const bool gap_joint = has_gap_ && key == gap_key_;
-  Vec2 gap_from = Vec2::Zero(), gap_along = Vec2::Zero();
-  if (gap_joint) {  // the joint's ends at the start, carried by block a
-    gap_from = a.to_world(gap_intrados_local_);
-    gap_along = a.to_world(gap_extrados_local_) - gap_from;
-  }
-  double slip_weighted = 0, length_total = 0;
-  bool touching = false;
   // The pair's resultant: force on b and its moment about the origin, applied once at the end.
-  Vec2 resultant = Vec2::Zero();
-  double moment = 0;
+  struct PairSum {
+    Vec2 resultant = Vec2::Zero();
+    double moment = 0, slip_weighted = 0, length_total = 0;
+    bool touching = false;
+  };
   // The node loop, compiled twice: the plain law (every joint without effects, kept exactly as the
   // engine was before the effects) and the general one (effects on, or the gap joint).
   const auto node_loop = [&](auto plain_tag) {
     constexpr bool kPlain = decltype(plain_tag)::value;
+    Vec2 resultant = Vec2::Zero();
+    double moment = 0, slip_weighted = 0, length_total = 0;
+    bool touching = false;
+    Vec2 gap_from = Vec2::Zero(), gap_along = Vec2::Zero();
+    if (!kPlain && gap_joint) {  // the joint's ends at the start, carried by block a
+      gap_from = a.to_world(gap_intrados_local_);
+      gap_along = a.to_world(gap_extrados_local_) - gap_from;
+    }
     for (int k = 0; k < count; ++k) {
       // Nodes are stored in the order of increasing coordinate along tangent_ab.
       const int slot = ref_on_a ? k : count - 1 - k;
@@ -500,19 +504,17 @@ void Engine::process_pair(int ia, int ib) {
       slip_weighted += f.plastic_slip * lengths[k];
       length_total += lengths[k];
     }
+    return PairSum{resultant, moment, slip_weighted, length_total, touching};
   };
-  if (plain && !gap_joint)
-    node_loop(std::true_type{});
-  else
-    node_loop(std::false_type{});
-  if (touching) {
-    b.force += resultant;
-    b.torque += moment - cross(b.position, resultant);
-    a.force -= resultant;
-    a.torque -= moment - cross(a.position, resultant);
+  const PairSum sum = plain && !gap_joint ? node_loop(std::true_type{}) : node_loop(std::false_type{});
+  if (sum.touching) {
+    b.force += sum.resultant;
+    b.torque += sum.moment - cross(b.position, sum.resultant);
+    a.force -= sum.resultant;
+    a.torque -= sum.moment - cross(a.position, sum.resultant);
   }
-  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
-  if (touching && loading_stage_) contact.ever_touched = true;
+  if (loading_stage_ && sum.length_total > 0) contact.slip += sum.slip_weighted / sum.length_total;
+  if (sum.touching && loading_stage_) contact.ever_touched = true;
 }
 
 void Engine::compute_forces() {
