@@ -90,11 +90,12 @@ struct Contact {
   bool active = false;  // within the search margin in the previous step (shear history valid)
   bool seen = false;    // within the search margin in this step
   std::vector<double> shear;  // stored shear force per node (N)
-  std::vector<NodeHistory> history;  // per node, only for joint groups with an effect on
   std::vector<double> gap;    // last gap per node (m), for reports
   // Joint history since the gauges were zeroed.
   double slip = 0;
   bool ever_touched = false;
+  std::vector<NodeHistory> history;  // per node, only for joint groups with an effect on (kept last:
+                                     // the plain law's hot fields keep their place)
 };
 
 struct GroupLaw {
