@@ -2,6 +2,7 @@
 // experiment's own rate (with density scaling), and a dry-joint wall. Counters: simulated steps
 // per second and contact-node updates per second.
 //   build/bench/bench_dem --benchmark_filter=...
+#include "demcal/dem/effects.hpp"
 #include "demcal/dem/generators.hpp"
 #include "demcal/dem/simulation.hpp"
 
@@ -57,6 +58,30 @@ void Wall_SW30_2mm_travel(benchmark::State& state) {
   run_scene(state, make_wall(o));
 }
 BENCHMARK(Wall_SW30_2mm_travel)->Unit(benchmark::kMillisecond)->Iterations(2);
+
+// The reference arch (15 points/joint, 10 mm/s) with one effect of the registry switched on at its
+// default values; range(0) indexes effect_registry(). Compare with ReferenceArch_10mm_per_s/15.
+void ReferenceArch_effect(benchmark::State& state) {
+  const Effect& effect = effect_registry().at(static_cast<std::size_t>(state.range(0)));
+  Scene s = make_arch(ArchOptions{});
+  std::vector<std::string> targets;
+  if (effect.target == EffectTarget::joint) targets = {"voussoir_9/voussoir_10"};
+  enable_effect(s, effect.name, targets);
+  state.SetLabel(effect.name);
+  long steps = 0, updates = 0;
+  double peak = 0;
+  for (auto _ : state) {
+    const Recording r = simulate(s);
+    steps += r.steps;
+    updates += r.contact_point_updates;
+    peak = r.peak_force;
+  }
+  state.counters["steps_per_s"] = benchmark::Counter(static_cast<double>(steps), benchmark::Counter::kIsRate);
+  state.counters["node_updates_per_s"] = benchmark::Counter(static_cast<double>(updates), benchmark::Counter::kIsRate);
+  state.counters["steps"] = static_cast<double>(steps) / state.iterations();
+  state.counters["peak_N"] = peak;
+}
+BENCHMARK(ReferenceArch_effect)->DenseRange(0, 6)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

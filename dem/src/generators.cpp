@@ -1,5 +1,6 @@
 #include "demcal/dem/generators.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <string>
@@ -54,6 +55,45 @@ Vec2 centroid_of(const Block& b) {
 }
 
 }  // namespace
+
+void apply_effects(Scene& s, const EffectOptions& e) {
+  const auto set_if = [&s](const char* name, double value) {
+    if (value != 0) set_parameter(s, name, value);
+  };
+  set_if("closure_max", e.closure_max);
+  if (e.slip_softening != 0 || e.friction_residual_deg != 0) {
+    set_parameter(s, "friction_residual_deg", e.friction_residual_deg);
+    set_parameter(s, "slip_softening", e.slip_softening);
+  }
+  set_if("cohesion", e.cohesion);
+  set_if("tensile_strength", e.tensile_strength);
+  set_if("compressive_strength", e.compressive_strength);
+  set_if("crushing_softening", e.crushing_softening);
+  if (e.support_kx != 0 || e.support_ky != 0 || e.support_kr != 0) {
+    std::vector<std::string> blocks;
+    for (std::size_t from = 0; from <= e.support_blocks.size();) {
+      const std::size_t comma = std::min(e.support_blocks.find(',', from), e.support_blocks.size());
+      if (comma > from) blocks.push_back(e.support_blocks.substr(from, comma - from));
+      from = comma + 1;
+    }
+    if (blocks.empty()) blocks.push_back("");  // bare names: every fixed block
+    for (const auto& b : blocks) {
+      const std::string prefix = b.empty() ? "" : b + ".";
+      set_parameter(s, prefix + "support_kx", e.support_kx);
+      set_parameter(s, prefix + "support_ky", e.support_ky);
+      set_parameter(s, prefix + "support_kr", e.support_kr);
+    }
+  }
+  if (!e.gap_joint.empty()) {
+    s.joint_gap.joint = e.gap_joint;
+    s.joint_gap.intrados = e.gap_intrados;
+    s.joint_gap.extrados = e.gap_extrados;
+  } else if (e.gap_intrados != 0 || e.gap_extrados != 0) {
+    throw SceneError("--gap-intrados/--gap-extrados", "need --gap-joint to name the joint");
+  }
+  set_if("beam_kr", e.beam_kr);
+  s.Validate(s.name);
+}
 
 void ArchOptions::Validate() const {
   check(span > 0 && std::isfinite(span), "--span", "must be positive", span);
@@ -130,6 +170,7 @@ Scene make_arch(const ArchOptions& o) {
   }
   s.gauges.push_back({"load_vertical", loaded.name, load_point, Vec2(0, -1)});
   s.gauges.push_back({"abutment_horizontal", s.blocks[1].name, centroid_of(s.blocks[1]), Vec2(1, 0)});
+  apply_effects(s, o.effects);
   return s;
 }
 
@@ -233,6 +274,7 @@ Scene make_wall(const WallOptions& o) {
   s.loading.compression_only = false;
   s.loading.record_interval = o.max_displacement / 1000;
   s.gauges.push_back({"top_horizontal", "beam", load_point, Vec2(1, 0)});
+  apply_effects(s, o.effects);
   return s;
 }
 

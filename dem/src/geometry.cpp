@@ -79,4 +79,27 @@ double overlap_depth(const std::vector<Vec2>& a, const std::vector<Vec2>& b) {
   return -std::max(max_separation(a, b), max_separation(b, a));
 }
 
+bool shared_edge(const std::vector<Vec2>& a, const std::vector<Vec2>& b, Vec2& p, Vec2& q, double tolerance) {
+  double best = tolerance;
+  bool found = false;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const Vec2 a1 = a[i], a2 = a[(i + 1) % a.size()];
+    const double length = (a2 - a1).norm();
+    const Vec2 t = (a2 - a1) / length, n(t.y(), -t.x());
+    for (std::size_t j = 0; j < b.size(); ++j) {
+      const Vec2 b1 = b[j], b2 = b[(j + 1) % b.size()];
+      if (std::abs((b1 - a1).dot(n)) > tolerance || std::abs((b2 - a1).dot(n)) > tolerance) continue;
+      const double s1 = (b1 - a1).dot(t), s2 = (b2 - a1).dot(t);
+      const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(length, std::max(s1, s2));
+      if (hi - lo > best) {
+        best = hi - lo;
+        p = a1 + lo * t;
+        q = a1 + hi * t;
+        found = true;
+      }
+    }
+  }
+  return found;
+}
+
 }  // namespace demcal::dem::geometry

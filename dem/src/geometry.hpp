@@ -20,4 +20,8 @@ inline Vec2 perp(const Vec2& v) { return Vec2(-v.y(), v.x()); }  // rotated +90 
 // (the smallest push that separates them), <= 0 when apart.
 double overlap_depth(const std::vector<Vec2>& a, const std::vector<Vec2>& b);
 
+// The segment [p, q] along which two convex polygons share an edge (opposed faces on one line
+// within `tolerance` m, overlapping by more than it). False when they share no edge.
+bool shared_edge(const std::vector<Vec2>& a, const std::vector<Vec2>& b, Vec2& p, Vec2& q, double tolerance = 1e-7);
+
 }  // namespace demcal::dem::geometry

@@ -4,6 +4,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -104,6 +105,20 @@ json vec2_json(const Vec2& v) { return json::array({v.x(), v.y()}); }
 
 }  // namespace
 
+namespace {
+
+// Physical bounds of the effect parameters (documented in docs/scene-format.md).
+constexpr double kMaxClosure = 0.01;          // m: rough-joint closures are micrometres to a millimetre
+constexpr double kMaxBondStrength = 1e8;      // Pa: no masonry bond carries 100 MPa
+constexpr double kMaxCompressiveStrength = 1e9;  // Pa: stronger than any stone
+
+void require_at_most(double v, double bound, const std::string& where, const std::string& why) {
+  require_non_negative(v, where);
+  if (v > bound) throw SceneError(where, "must be at most " + format_value(bound) + " (" + why + "), got " + format_value(v));
+}
+
+}  // namespace
+
 void JointMaterial::Validate(const std::string& where) const {
   require_positive(normal_stiffness, where + ".kn");
   require_positive(shear_stiffness, where + ".ks");
@@ -111,6 +126,17 @@ void JointMaterial::Validate(const std::string& where) const {
   if (friction_angle < 0 || friction_angle >= std::numbers::pi / 2)
     throw SceneError(where + ".friction_deg",
                      "must be in [0, 90) degrees, got " + format_value(friction_angle / kDegree));
+  require_at_most(closure_max, kMaxClosure, where + ".closure_max", "m; a rough joint closes by at most millimetres");
+  require_non_negative(slip_softening, where + ".slip_softening");
+  require_finite(friction_residual, where + ".friction_residual_deg");
+  if (friction_residual < 0 || (softening_on() && friction_residual > friction_angle))
+    throw SceneError(where + ".friction_residual_deg", "must be in [0, friction_deg = " +
+                                                           format_value(friction_angle / kDegree) + "] degrees, got " +
+                                                           format_value(friction_residual / kDegree));
+  require_at_most(cohesion, kMaxBondStrength, where + ".cohesion", "Pa");
+  require_at_most(tensile_strength, kMaxBondStrength, where + ".tensile_strength", "Pa");
+  require_at_most(compressive_strength, kMaxCompressiveStrength, where + ".compressive_strength", "Pa");
+  require_non_negative(crushing_softening, where + ".crushing_softening");
 }
 
 int Scene::block_index(const std::string& block_name) const {
@@ -159,6 +185,14 @@ void Scene::Validate(const std::string& source) const {
       throw SceneError(where + ".vertices", "zero-area block");
     if (area < 0) throw SceneError(where + ".vertices", "vertices must be counter-clockwise");
     if (!geometry::is_convex_ccw(b.vertices)) throw SceneError(where + ".vertices", "the polygon is not convex");
+    require_non_negative(b.support_kx, where + ".support_kx");
+    require_non_negative(b.support_ky, where + ".support_ky");
+    require_non_negative(b.support_kr, where + ".support_kr");
+    require_non_negative(b.beam_kr, where + ".beam_kr");
+    if (!b.fixed && (b.support_kx > 0 || b.support_ky > 0 || b.support_kr > 0))
+      throw SceneError(where, "support springs (support_kx, support_ky, support_kr) apply to fixed blocks only");
+    if (b.fixed && b.beam_kr > 0)
+      throw SceneError(where + ".beam_kr", "a rotational restraint applies to a free block, not a fixed one");
     any_free = any_free || !b.fixed;
   }
   if (!any_free) throw SceneError(s + "blocks", "every block is fixed: nothing can move");
@@ -171,6 +205,21 @@ void Scene::Validate(const std::string& source) const {
         throw SceneError(s + "blocks", "blocks '" + blocks[i].name + "' and '" + blocks[j].name +
                                            "' overlap at the start by " + format_value(depth) + " m");
     }
+
+  if (joint_gap.on()) {
+    const std::string where = s + "joint_gap";
+    const auto slash = joint_gap.joint.find('/');
+    if (slash == std::string::npos || joint_gap.joint.find('/', slash + 1) != std::string::npos)
+      throw SceneError(where + ".joint", "expected two block names as 'blockA/blockB', got '" + joint_gap.joint + "'");
+    const int ia = block_index(joint_gap.joint.substr(0, slash)), ib = block_index(joint_gap.joint.substr(slash + 1));
+    if (ia < 0 || ib < 0 || ia == ib)
+      throw SceneError(where + ".joint", "'" + joint_gap.joint + "' does not name two different blocks of the scene");
+    Vec2 p, q;
+    if (!geometry::shared_edge(blocks[ia].vertices, blocks[ib].vertices, p, q))
+      throw SceneError(where + ".joint", "blocks of '" + joint_gap.joint + "' share no edge at the start");
+    require_at_most(joint_gap.intrados, JointGap::kMaxOpening, where + ".intrados", "m; a fit imperfection");
+    require_at_most(joint_gap.extrados, JointGap::kMaxOpening, where + ".extrados", "m; a fit imperfection");
+  }
 
   const int n = contact.points_per_joint;
   if (n < 2 || n > 200)
@@ -245,6 +294,13 @@ Scene scene_from_json(const json& j, const std::string& source) {
     m.normal_stiffness = g.number("kn");
     m.shear_stiffness = g.number("ks");
     m.friction_angle = g.number("friction_deg") * kDegree;
+    m.closure_max = g.number("closure_max", m.closure_max);
+    m.friction_residual = g.number("friction_residual_deg", m.friction_residual / kDegree) * kDegree;
+    m.slip_softening = g.number("slip_softening", m.slip_softening);
+    m.cohesion = g.number("cohesion", m.cohesion);
+    m.tensile_strength = g.number("tensile_strength", m.tensile_strength);
+    m.compressive_strength = g.number("compressive_strength", m.compressive_strength);
+    m.crushing_softening = g.number("crushing_softening", m.crushing_softening);
     scene.joint_groups[group] = m;
   }
   scene.default_joint_group = root.string("default_joint_group", scene.joint_groups.begin()->first);
@@ -273,6 +329,10 @@ Scene scene_from_json(const json& j, const std::string& source) {
     block.fixed = b.boolean("fixed", false);
     block.fixed_rotation = b.boolean("fixed_rotation", false);
     block.gravity = b.boolean("gravity", true);
+    block.support_kx = b.number("support_kx", 0);
+    block.support_ky = b.number("support_ky", 0);
+    block.support_kr = b.number("support_kr", 0);
+    block.beam_kr = b.number("beam_kr", 0);
     const json& vertices = b.required("vertices");
     if (!vertices.is_array()) throw SceneError(b.key_path("vertices"), "expected an array of [x, y]");
     for (std::size_t v = 0; v < vertices.size(); ++v)
@@ -331,6 +391,12 @@ Scene scene_from_json(const json& j, const std::string& source) {
       scene.gauges.push_back({gr.string("name"), gr.string("block"), gr.vec2("point"), gr.vec2("direction", Vec2(1, 0))});
     }
   }
+  if (root.has("joint_gap")) {
+    const ObjectReader c(root.required("joint_gap"), at("joint_gap"));
+    scene.joint_gap.joint = c.string("joint");
+    scene.joint_gap.intrados = c.number("intrados", 0);
+    scene.joint_gap.extrados = c.number("extrados", 0);
+  }
   scene.Validate(source);
   return scene;
 }
@@ -342,9 +408,20 @@ json scene_to_json(const Scene& scene) {
   j["name"] = scene.name;
   j["width"] = scene.width;
   j["gravity"] = vec2_json(scene.gravity);
-  for (const auto& [group, m] : scene.joint_groups)
-    j["joint_groups"][group] = {{"kn", m.normal_stiffness}, {"ks", m.shear_stiffness},
-                                {"friction_deg", m.friction_angle / kDegree}};
+  for (const auto& [group, m] : scene.joint_groups) {
+    json g = {{"kn", m.normal_stiffness}, {"ks", m.shear_stiffness}, {"friction_deg", m.friction_angle / kDegree}};
+    // Effect keys appear only when set, so a scene without effects keeps its text and its hash.
+    if (m.closure_max != 0) g["closure_max"] = m.closure_max;
+    if (m.slip_softening != 0 || m.friction_residual != 0) {
+      g["friction_residual_deg"] = m.friction_residual / kDegree;
+      g["slip_softening"] = m.slip_softening;
+    }
+    if (m.cohesion != 0) g["cohesion"] = m.cohesion;
+    if (m.tensile_strength != 0) g["tensile_strength"] = m.tensile_strength;
+    if (m.compressive_strength != 0) g["compressive_strength"] = m.compressive_strength;
+    if (m.crushing_softening != 0) g["crushing_softening"] = m.crushing_softening;
+    j["joint_groups"][group] = g;
+  }
   j["default_joint_group"] = scene.default_joint_group;
   j["joint_group_rules"] = json::array();
   for (const auto& r : scene.joint_group_rules)
@@ -358,6 +435,10 @@ json scene_to_json(const Scene& scene) {
     if (b.fixed) block["fixed"] = true;
     if (b.fixed_rotation) block["fixed_rotation"] = true;
     if (!b.gravity) block["gravity"] = false;
+    if (b.support_kx != 0) block["support_kx"] = b.support_kx;
+    if (b.support_ky != 0) block["support_ky"] = b.support_ky;
+    if (b.support_kr != 0) block["support_kr"] = b.support_kr;
+    if (b.beam_kr != 0) block["beam_kr"] = b.beam_kr;
     j["blocks"].push_back(block);
   }
   j["contact"] = {{"points_per_joint", scene.contact.points_per_joint},
@@ -385,6 +466,9 @@ json scene_to_json(const Scene& scene) {
   for (const Gauge& g : scene.gauges)
     j["gauges"].push_back({{"name", g.name}, {"block", g.block}, {"point", vec2_json(g.point)},
                            {"direction", vec2_json(g.direction)}});
+  if (scene.joint_gap.on())
+    j["joint_gap"] = {{"joint", scene.joint_gap.joint}, {"intrados", scene.joint_gap.intrados},
+                      {"extrados", scene.joint_gap.extrados}};
   return j;
 }
 
@@ -428,49 +512,162 @@ std::pair<std::string, std::string> split_parameter(const std::string& name) {
   return {name.substr(0, dot), name.substr(dot + 1)};
 }
 
-double& material_field(JointMaterial& m, const std::string& field, const std::string& name) {
+const std::vector<std::string>& joint_fields() {
+  static const std::vector<std::string> fields = {
+      "kn",       "ks",   "friction_deg",     "closure_max",          "friction_residual_deg", "slip_softening",
+      "cohesion", "tensile_strength", "compressive_strength", "crushing_softening"};
+  return fields;
+}
+const std::vector<std::string>& support_fields() {
+  static const std::vector<std::string> fields = {"support_kx", "support_ky", "support_kr"};
+  return fields;
+}
+bool is_angle(const std::string& field) { return field == "friction_deg" || field == "friction_residual_deg"; }
+bool contains(const std::vector<std::string>& list, const std::string& x) {
+  return std::find(list.begin(), list.end(), x) != list.end();
+}
+
+double& material_field(JointMaterial& m, const std::string& field) {
   if (field == "kn") return m.normal_stiffness;
   if (field == "ks") return m.shear_stiffness;
   if (field == "friction_deg") return m.friction_angle;
-  throw SceneError("parameter '" + name + "'", "unknown parameter (expected kn, ks or friction_deg, optionally as <joint group>.<name>)");
+  if (field == "closure_max") return m.closure_max;
+  if (field == "friction_residual_deg") return m.friction_residual;
+  if (field == "slip_softening") return m.slip_softening;
+  if (field == "cohesion") return m.cohesion;
+  if (field == "tensile_strength") return m.tensile_strength;
+  if (field == "compressive_strength") return m.compressive_strength;
+  return m.crushing_softening;
+}
+double& block_field(Block& b, const std::string& field) {
+  if (field == "support_kx") return b.support_kx;
+  if (field == "support_ky") return b.support_ky;
+  if (field == "support_kr") return b.support_kr;
+  return b.beam_kr;
+}
+
+// Where a parameter name points: joint groups, blocks or the joint gap.
+struct ParameterTarget {
+  enum class Kind { groups, blocks, gap } kind = Kind::groups;
+  std::vector<std::string> names;  // groups or blocks
+  std::string field;
+};
+
+ParameterTarget resolve(const Scene& scene, const std::string& name, bool for_reading) {
+  const auto [prefix, field] = split_parameter(name);
+  const std::string where = "parameter '" + name + "'";
+  ParameterTarget t;
+  t.field = field;
+  if (contains(joint_fields(), field)) {
+    if (prefix.empty()) {
+      if (scene.joint_groups.empty()) throw SceneError(where, "the scene has no joint groups");
+      if (for_reading)
+        t.names = {scene.default_joint_group.empty() ? scene.joint_groups.begin()->first : scene.default_joint_group};
+      else
+        for (const auto& [g, m] : scene.joint_groups) t.names.push_back(g);
+    } else {
+      if (!scene.joint_groups.count(prefix)) throw SceneError(where, "unknown joint group '" + prefix + "'");
+      t.names = {prefix};
+    }
+    return t;
+  }
+  if (contains(support_fields(), field) || field == "beam_kr") {
+    t.kind = ParameterTarget::Kind::blocks;
+    const bool support = field != "beam_kr";
+    if (!prefix.empty()) {
+      const int i = scene.block_index(prefix);
+      if (i < 0) throw SceneError(where, "unknown block '" + prefix + "'");
+      if (support && !scene.blocks[i].fixed) throw SceneError(where, "support springs need a fixed block; '" + prefix + "' is free");
+      if (!support && scene.blocks[i].fixed) throw SceneError(where, "beam_kr needs a free block; '" + prefix + "' is fixed");
+      t.names = {prefix};
+    } else if (support) {  // every fixed block; reading gives the first compliant one, else the first
+      for (const Block& b : scene.blocks)
+        if (b.fixed) t.names.push_back(b.name);
+      if (t.names.empty()) throw SceneError(where, "the scene has no fixed block");
+      if (for_reading) {
+        std::string first = t.names.front();
+        for (const Block& b : scene.blocks)
+          if (b.compliant_support()) {
+            first = b.name;
+            break;
+          }
+        t.names = {first};
+      }
+    } else {
+      if (scene.loading.type == "none" || scene.block_index(scene.loading.block) < 0)
+        throw SceneError(where, "the scene has no loaded block; name one as <block>.beam_kr");
+      t.names = {scene.loading.block};
+    }
+    return t;
+  }
+  if (field == "gap_intrados" || field == "gap_extrados") {
+    if (!prefix.empty()) throw SceneError(where, "the gap openings take no prefix (the joint is joint_gap.joint)");
+    if (!scene.joint_gap.on()) throw SceneError(where, "the scene names no gap joint (set joint_gap.joint first)");
+    t.kind = ParameterTarget::Kind::gap;
+    return t;
+  }
+  throw SceneError(where, "unknown parameter (expected kn, ks, friction_deg, closure_max, friction_residual_deg, "
+                          "slip_softening, cohesion, tensile_strength, compressive_strength, crushing_softening "
+                          "[as <joint group>.<name> for one group], <block>.support_kx|support_ky|support_kr, "
+                          "beam_kr, gap_intrados or gap_extrados)");
 }
 
 }  // namespace
 
 void set_parameter(Scene& scene, const std::string& name, double value) {
-  const auto [group, field] = split_parameter(name);
-  JointMaterial probe;
-  material_field(probe, field, name);  // rejects an unknown field name before anything changes
+  const ParameterTarget t = resolve(scene, name, false);  // rejects unknown names before anything changes
   if (!std::isfinite(value)) throw SceneError("parameter '" + name + "'", "value is not finite");
-  const double stored = field == "friction_deg" ? value * kDegree : value;
-  if (group.empty()) {
-    for (auto& [g, m] : scene.joint_groups) material_field(m, field, name) = stored;
-    return;
+  switch (t.kind) {
+    case ParameterTarget::Kind::groups: {
+      const double stored = is_angle(t.field) ? value * kDegree : value;
+      for (const auto& g : t.names) material_field(scene.joint_groups.at(g), t.field) = stored;
+      return;
+    }
+    case ParameterTarget::Kind::blocks:
+      for (const auto& b : t.names) block_field(scene.blocks[scene.block_index(b)], t.field) = value;
+      return;
+    case ParameterTarget::Kind::gap:
+      (t.field == "gap_intrados" ? scene.joint_gap.intrados : scene.joint_gap.extrados) = value;
+      return;
   }
-  auto it = scene.joint_groups.find(group);
-  if (it == scene.joint_groups.end())
-    throw SceneError("parameter '" + name + "'", "unknown joint group '" + group + "'");
-  material_field(it->second, field, name) = stored;
 }
 
 double get_parameter(const Scene& scene, const std::string& name) {
-  auto [group, field] = split_parameter(name);
-  if (group.empty()) {
-    if (scene.joint_groups.empty()) throw SceneError("parameter '" + name + "'", "the scene has no joint groups");
-    group = scene.default_joint_group.empty() ? scene.joint_groups.begin()->first : scene.default_joint_group;
+  const ParameterTarget t = resolve(scene, name, true);
+  switch (t.kind) {
+    case ParameterTarget::Kind::groups: {
+      JointMaterial m = scene.joint_groups.at(t.names.front());
+      const double v = material_field(m, t.field);
+      return is_angle(t.field) ? v / kDegree : v;
+    }
+    case ParameterTarget::Kind::blocks: {
+      Block b = scene.blocks[scene.block_index(t.names.front())];
+      return block_field(b, t.field);
+    }
+    case ParameterTarget::Kind::gap:
+      return t.field == "gap_intrados" ? scene.joint_gap.intrados : scene.joint_gap.extrados;
   }
-  auto it = scene.joint_groups.find(group);
-  if (it == scene.joint_groups.end())
-    throw SceneError("parameter '" + name + "'", "unknown joint group '" + group + "'");
-  JointMaterial m = it->second;
-  const double v = material_field(m, field, name);
-  return field == "friction_deg" ? v / kDegree : v;
+  return 0;
 }
 
 std::vector<std::string> parameter_names(const Scene& scene) {
-  std::vector<std::string> names = {"kn", "ks", "friction_deg"};
+  std::vector<std::string> names = joint_fields();
   for (const auto& [group, m] : scene.joint_groups)
-    for (const char* field : {"kn", "ks", "friction_deg"}) names.push_back(group + "." + field);
+    for (const auto& field : joint_fields()) names.push_back(group + "." + field);
+  bool any_fixed = false;
+  for (const Block& b : scene.blocks)
+    if (b.fixed) {
+      any_fixed = true;
+      for (const auto& field : support_fields()) names.push_back(b.name + "." + field);
+    }
+  if (any_fixed) names.insert(names.end(), support_fields().begin(), support_fields().end());
+  if (scene.loading.type != "none" && scene.block_index(scene.loading.block) >= 0) names.push_back("beam_kr");
+  for (const Block& b : scene.blocks)
+    if (!b.fixed && b.beam_kr > 0) names.push_back(b.name + ".beam_kr");
+  if (scene.joint_gap.on()) {
+    names.push_back("gap_intrados");
+    names.push_back("gap_extrados");
+  }
   return names;
 }
 

@@ -47,6 +47,11 @@ struct Body {
   double inertial_mass = 0, inertial_inertia = 0;  // density-scaled
   Vec2 weight = Vec2::Zero();
   bool fixed = false, fixed_rotation = false;
+  // Support springs (support-compliance) and the rotational restraint (boundary-restraint): springs
+  // to the start position and angle; a held direction of a compliant support does not move.
+  bool springs = false, hold_x = false, hold_y = false;
+  double spring_x = 0, spring_y = 0, spring_r = 0;
+  bool counts_weight = true;  // part of the equilibrium reference weight (free blocks of the scene)
   double radius = 0;  // largest vertex distance from the centroid
   Vec2 box_min = Vec2::Zero(), box_max = Vec2::Zero();
 
@@ -89,12 +94,16 @@ struct Contact {
   // Joint history since the gauges were zeroed.
   double slip = 0;
   bool ever_touched = false;
+  std::vector<NodeHistory> history;  // per node, only for joint groups with an effect on (kept last:
+                                     // the plain law's hot fields keep their place)
 };
 
 struct GroupLaw {
   std::string name;
   JointMaterial material;
   MohrCoulombLaw law;
+  EffectLaw effects;
+  bool plain = true;
 };
 
 class Engine {
@@ -106,6 +115,7 @@ class Engine {
     cos_edge_tolerance_ = std::cos(scene_.contact.edge_angle_tolerance);
     margin_ = scene_.contact.search_margin;
     setup_loading();
+    setup_gap();
     dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
   }
 
@@ -115,10 +125,20 @@ class Engine {
   void build_bodies();
   void build_groups();
   void setup_loading();
+  void setup_gap();
   double critical_time_step() const;
   int group_for(const Body& a, const Body& b, const Vec2& normal) const;
   void compute_forces();
   void process_pair(int ia, int ib);
+  // Geometry of one edge or corner contact's nodes, for the node loop with effects.
+  struct NodeLayout {
+    Vec2 r1, tr, normal, normal_ab, tangent_ab;
+    bool ref_on_a = true;
+    bool gap_joint = false;
+  };
+  [[gnu::noinline]] void process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
+                                                    const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                                    const std::vector<double>& gaps, const std::vector<double>& lengths);
   void integrate();
   double unbalanced_ratio() const;
   double actuator_force() const;
@@ -129,6 +149,7 @@ class Engine {
 
   const Scene& scene_;
   std::vector<Body> bodies_;
+  std::vector<int> spring_bodies_;  // bodies with support springs or a rotational restraint
   std::vector<GroupLaw> groups_;
   std::unordered_map<std::uint64_t, Contact> contacts_;
   std::vector<std::pair<int, int>> pairs_;
@@ -139,7 +160,13 @@ class Engine {
   double dt_ = 0;
   double max_weight_ = 0;
   bool loading_stage_ = false;
+  bool first_step_ = true;  // bonds (cohesion) exist only at joints present at the start
   long node_updates_ = 0;
+
+  // joint-gap: the pair key and the joint's two ends in the first block's frame.
+  bool has_gap_ = false;
+  std::uint64_t gap_key_ = 0;
+  Vec2 gap_intrados_local_ = Vec2::Zero(), gap_extrados_local_ = Vec2::Zero();
 
   // Loading.
   bool has_actuator_ = false;
@@ -185,14 +212,47 @@ void Engine::build_bodies() {
     body.weight = b.gravity ? Vec2(body.mass * scene_.gravity) : Vec2(Vec2::Zero());
     body.fixed = b.fixed;
     body.fixed_rotation = b.fixed_rotation;
+    body.counts_weight = !b.fixed;
+    if (b.compliant_support()) {
+      body.fixed = false;
+      body.springs = true;
+      body.spring_x = b.support_kx;
+      body.spring_y = b.support_ky;
+      body.spring_r = b.support_kr;
+      body.hold_x = b.support_kx <= 0;
+      body.hold_y = b.support_ky <= 0;
+      body.fixed_rotation = b.support_kr <= 0;
+      body.weight = Vec2::Zero();
+    } else if (!b.fixed && b.beam_kr > 0) {
+      body.springs = true;
+      body.spring_r = b.beam_kr;
+      body.fixed_rotation = false;
+    }
     body.update_world();
-    if (!body.fixed) max_weight_ = std::max(max_weight_, body.mass * scene_.gravity.norm());
+    if (body.counts_weight) max_weight_ = std::max(max_weight_, body.mass * scene_.gravity.norm());
+    if (body.springs) spring_bodies_.push_back(static_cast<int>(bodies_.size()));
     bodies_.push_back(std::move(body));
   }
 }
 
 void Engine::build_groups() {
-  for (const auto& [name, material] : scene_.joint_groups) groups_.push_back({name, material, MohrCoulombLaw(material)});
+  for (const auto& [name, material] : scene_.joint_groups)
+    groups_.push_back({name, material, MohrCoulombLaw(material), EffectLaw(material), material.plain()});
+}
+
+void Engine::setup_gap() {
+  const JointGap& gap = scene_.joint_gap;
+  if (!gap.on()) return;
+  const auto slash = gap.joint.find('/');
+  int ia = scene_.block_index(gap.joint.substr(0, slash)), ib = scene_.block_index(gap.joint.substr(slash + 1));
+  if (ia > ib) std::swap(ia, ib);
+  Vec2 p, q;
+  geometry::shared_edge(scene_.blocks[ia].vertices, scene_.blocks[ib].vertices, p, q);  // checked by Validate
+  const bool p_first = p.y() < q.y() || (p.y() == q.y() && p.x() <= q.x());
+  has_gap_ = true;
+  gap_key_ = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
+  gap_intrados_local_ = bodies_[ia].to_local(p_first ? p : q);
+  gap_extrados_local_ = bodies_[ia].to_local(p_first ? q : p);
 }
 
 void Engine::setup_loading() {
@@ -226,7 +286,9 @@ void Engine::setup_loading() {
 double Engine::critical_time_step() const {
   double kn = 0, ks = 0;
   for (const auto& g : groups_) {
-    kn = std::max(kn, g.material.normal_stiffness);
+    // Hyperbolic closure stiffens the joint up to kClosureStiffening x kn.
+    const double stiffening = g.material.closure_on() ? JointMaterial::kClosureStiffening : 1.0;
+    kn = std::max(kn, stiffening * g.material.normal_stiffness);
     ks = std::max(ks, g.material.shear_stiffness);
   }
   double omega_squared = 0;
@@ -243,6 +305,10 @@ double Engine::critical_time_step() const {
       k_translation += scene_.width * length * (kn + ks);
       k_rotation += scene_.width * (kn * (c * c * length - c * length * length + length * length * length / 3) +
                                     ks * std::pow(cross(r1, t), 2) * length);
+    }
+    if (b.springs) {
+      k_translation += b.spring_x + b.spring_y;
+      k_rotation += b.spring_r;
     }
     if (has_actuator_ && static_cast<int>(i) == actuator_point_.body) {
       k_translation += actuator_stiffness_;
@@ -377,15 +443,26 @@ void Engine::process_pair(int ia, int ib) {
   }
   Contact& contact = it->second;
   const int count = static_cast<int>(s_nodes.size());
+  const GroupLaw& group = groups_[contact.group];
   if (!contact.active || contact.corner != !edge_contact || static_cast<int>(contact.shear.size()) != count) {
     contact.shear.assign(count, 0.0);
+    if (!group.plain) {
+      NodeHistory fresh;
+      contact.history.assign(count, fresh);
+    }
   }
   contact.seen = true;
   contact.corner = !edge_contact;
   contact.ref_on_a = ref_on_a;
   contact.gap.resize(count);
 
-  const MohrCoulombLaw& law = groups_[contact.group].law;
+  if (!group.plain || (has_gap_ && key == gap_key_)) {
+    const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, has_gap_ && key == gap_key_};
+    process_nodes_with_effects(a, b, contact, group, layout, s_nodes, gaps, lengths);
+    return;
+  }
+  // The plain law: every joint group without effects, exactly as the engine was before them.
+  const MohrCoulombLaw& law = group.law;
   double slip_weighted = 0, length_total = 0;
   bool touching = false;
   // The pair's resultant: force on b and its moment about the origin, applied once at the end.
@@ -421,10 +498,69 @@ void Engine::process_pair(int ia, int ib) {
   if (touching && loading_stage_) contact.ever_touched = true;
 }
 
+// The node loop of a joint group with effects on (EffectLaw and its node history), or of the gap
+// joint (whose group may be plain).
+void Engine::process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
+                                        const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                        const std::vector<double>& gaps, const std::vector<double>& lengths) {
+  const int count = static_cast<int>(s_nodes.size());
+  const bool plain = group.plain;
+  double slip_weighted = 0, length_total = 0;
+  bool touching = false;
+  Vec2 resultant = Vec2::Zero();
+  double moment = 0;
+  Vec2 gap_from = Vec2::Zero(), gap_along = Vec2::Zero();
+  if (layout.gap_joint) {  // the joint's ends at the start, carried by block a
+    gap_from = a.to_world(gap_intrados_local_);
+    gap_along = a.to_world(gap_extrados_local_) - gap_from;
+  }
+  for (int k = 0; k < count; ++k) {
+    const int slot = layout.ref_on_a ? k : count - 1 - k;
+    double gap = gaps[k];
+    const Vec2 point = layout.r1 + s_nodes[k] * layout.tr + 0.5 * gap * layout.normal;
+    if (layout.gap_joint) {
+      const double t = std::clamp((point - gap_from).dot(gap_along) / gap_along.squaredNorm(), 0.0, 1.0);
+      gap += scene_.joint_gap.intrados + t * (scene_.joint_gap.extrados - scene_.joint_gap.intrados);
+    }
+    contact.gap[slot] = gap;
+    // A bond exists only where the faces touch at the start (within 1 um).
+    if (first_step_ && !plain) contact.history[slot].bonded = group.effects.bonds() && gap <= 1e-6;
+    NodeKinematics kin;
+    kin.penetration = -gap;
+    kin.area = lengths[k] * scene_.width;
+    if (kin.penetration > 0 || (!plain && contact.history[slot].bonded))
+      kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(layout.tangent_ab) * dt_;
+    const NodeForces f = plain ? group.law.evaluate(kin, contact.shear[slot])
+                               : group.effects.evaluate(kin, contact.shear[slot], contact.history[slot]);
+    ++node_updates_;
+    if (f.normal == 0) continue;
+    touching = true;
+    const Vec2 force_on_b = f.normal * layout.normal_ab + f.shear * layout.tangent_ab;
+    resultant += force_on_b;
+    moment += cross(point, force_on_b);
+    slip_weighted += f.plastic_slip * lengths[k];
+    length_total += lengths[k];
+  }
+  if (touching) {
+    b.force += resultant;
+    b.torque += moment - cross(b.position, resultant);
+    a.force -= resultant;
+    a.torque -= moment - cross(a.position, resultant);
+  }
+  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
+  if (touching && loading_stage_) contact.ever_touched = true;
+}
+
 void Engine::compute_forces() {
   for (Body& b : bodies_) {
     b.force = b.weight;
     b.torque = 0;
+  }
+  for (int i : spring_bodies_) {
+    Body& b = bodies_[i];
+    const Vec2 moved = b.position - b.start_position;
+    b.force -= Vec2(b.spring_x * moved.x(), b.spring_y * moved.y());
+    b.torque -= b.spring_r * b.angle;
   }
   for (const auto& f : constant_forces_) {
     Body& b = bodies_[f.at.body];
@@ -460,6 +596,7 @@ void Engine::compute_forces() {
   std::sort(pairs_.begin(), pairs_.end());
   for (auto& [key, c] : contacts_) c.seen = false;
   for (const auto& [i, j] : pairs_) process_pair(i, j);
+  first_step_ = false;
   for (auto& [key, c] : contacts_) {
     c.active = c.seen;
     if (!c.active) std::fill(c.gap.begin(), c.gap.end(), std::numeric_limits<double>::infinity());
@@ -481,8 +618,13 @@ void Engine::integrate() {
   const auto damped = [alpha](double f, double v) { return v == 0 ? f : f - alpha * std::abs(f) * (v > 0 ? 1 : -1); };
   for (Body& b : bodies_) {
     if (b.fixed) continue;
-    b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
-    b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
+    if (b.springs) {  // a compliant support may hold a direction
+      if (!b.hold_x) b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
+      if (!b.hold_y) b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
+    } else {
+      b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
+      b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
+    }
     if (!b.fixed_rotation) b.angular_velocity += dt_ * damped(b.torque, b.angular_velocity) / b.inertial_inertia;
     b.position += dt_ * b.velocity;
     b.angle += dt_ * b.angular_velocity;
@@ -494,7 +636,10 @@ double Engine::unbalanced_ratio() const {
   double worst = 0;
   for (const Body& b : bodies_) {
     if (b.fixed) continue;
-    worst = std::max(worst, b.force.norm());
+    if (b.hold_x || b.hold_y)  // a held direction carries a reaction, not an unbalance
+      worst = std::max(worst, Vec2(b.hold_x ? 0.0 : b.force.x(), b.hold_y ? 0.0 : b.force.y()).norm());
+    else
+      worst = std::max(worst, b.force.norm());
     if (!b.fixed_rotation) worst = std::max(worst, std::abs(b.torque) / b.radius);
   }
   return max_weight_ > 0 ? worst / max_weight_ : worst;
@@ -634,8 +779,8 @@ void Engine::finish(Recording& rec) const {
     s.vertices = b.world;
     s.displacement = b.position - b.start_position;
     s.rotation = b.angle;
-    s.fixed = b.fixed;
-    if (!b.fixed) rec.max_block_displacement = std::max(rec.max_block_displacement, s.displacement.norm());
+    s.fixed = !b.counts_weight;  // fixed in the scene (a compliant support included)
+    if (b.counts_weight) rec.max_block_displacement = std::max(rec.max_block_displacement, s.displacement.norm());
     rec.final_blocks.push_back(std::move(s));
   }
   std::vector<std::pair<std::uint64_t, const Contact*>> sorted;

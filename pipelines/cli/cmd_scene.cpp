@@ -9,6 +9,41 @@ namespace {
 
 using namespace demcal::dem;
 
+// Flags of the engine's effects (docs/engine.md, docs/scene-format.md); 0 / empty = off.
+void add_effect_flags(CLI::App* app, EffectOptions& e, bool wall) {
+  const std::string g = "Effects (0 = off)";
+  app->add_option("--closure-max", e.closure_max, "joint-closure: maximum joint closure, every joint group (m)")
+      ->group(g)->capture_default_str();
+  app->add_option("--friction-residual-deg", e.friction_residual_deg,
+                  "friction-softening: residual friction angle (degrees)")->group(g)->capture_default_str();
+  app->add_option("--slip-softening", e.slip_softening, "friction-softening: slip to the residual friction (m)")
+      ->group(g)->capture_default_str();
+  app->add_option("--cohesion", e.cohesion, "cohesion: bond cohesion (Pa)")->group(g)->capture_default_str();
+  app->add_option("--tensile-strength", e.tensile_strength, "cohesion: bond tensile strength (Pa)")
+      ->group(g)->capture_default_str();
+  app->add_option("--compressive-strength", e.compressive_strength, "crushing-cap: compressive strength (Pa)")
+      ->group(g)->capture_default_str();
+  app->add_option("--crushing-softening", e.crushing_softening,
+                  "crushing-cap: plastic closure to zero strength (m; 0 = no softening)")->group(g)->capture_default_str();
+  app->add_option("--support-kx", e.support_kx, "support-compliance: horizontal support spring (N/m)")
+      ->group(g)->capture_default_str();
+  app->add_option("--support-ky", e.support_ky, "support-compliance: vertical support spring (N/m)")
+      ->group(g)->capture_default_str();
+  app->add_option("--support-kr", e.support_kr, "support-compliance: rotational support spring (N m/rad)")
+      ->group(g)->capture_default_str();
+  app->add_option("--support-blocks", e.support_blocks,
+                  std::string("support-compliance: comma-separated supports (default: every fixed block, ") +
+                      (wall ? "base" : "abutment_left,abutment_right") + ")")->group(g);
+  app->add_option("--gap-joint", e.gap_joint, "joint-gap: the joint, as blockA/blockB")->group(g);
+  app->add_option("--gap-intrados", e.gap_intrados, "joint-gap: opening at the lower (intrados) end (m)")
+      ->group(g)->capture_default_str();
+  app->add_option("--gap-extrados", e.gap_extrados, "joint-gap: opening at the upper (extrados) end (m)")
+      ->group(g)->capture_default_str();
+  app->add_option("--beam-kr", e.beam_kr,
+                  std::string("boundary-restraint: rotational spring of the loaded block (N m/rad)") +
+                      (wall ? "; frees the beam's rotation against it" : ""))->group(g)->capture_default_str();
+}
+
 void setup_scene(CLI::App& app) {
   auto* scene = app.add_subcommand("scene", "Generate a scene JSON (reference arch or dry-joint wall)");
   scene->require_subcommand(1);
@@ -31,6 +66,7 @@ void setup_scene(CLI::App& app) {
   a->add_option("--max-displacement", arch.max_displacement, "Actuator travel (m)")->capture_default_str();
   a->add_option("--load", arch.load, "point | none (self-weight only)")->capture_default_str();
   a->add_option("--max-time", arch.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
+  add_effect_flags(a, arch.effects, false);
   a->add_option("-o,--output", arch_out, "Scene file to write")->required();
   a->callback([] {
     save_scene(make_arch(arch), arch_out);
@@ -57,6 +93,7 @@ void setup_scene(CLI::App& app) {
   w->add_option("--load-height", wall.load_height, "Height of the actuator above the wall top (m)")->capture_default_str();
   w->add_option("--actuator-stiffness", wall.actuator_stiffness, "Actuator spring stiffness (N/m)")->capture_default_str();
   w->add_option("--max-time", wall.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
+  add_effect_flags(w, wall.effects, true);
   w->add_option("-o,--output", wall_out, "Scene file to write")->required();
   w->callback([] {
     save_scene(make_wall(wall), wall_out);

@@ -6,6 +6,28 @@
 
 namespace demcal::dem {
 
+// The effects of docs/engine.md as generator options (`demcal scene arch|wall` flags). Every value
+// 0 / empty leaves the effect off. Joint-group options apply to every joint group of the scene.
+struct EffectOptions {
+  double closure_max = 0;            // m (joint-closure)
+  double friction_residual_deg = 0;  // degrees (friction-softening, with slip_softening > 0)
+  double slip_softening = 0;         // m
+  double cohesion = 0;               // Pa (cohesion)
+  double tensile_strength = 0;       // Pa
+  double compressive_strength = 0;   // Pa (crushing-cap)
+  double crushing_softening = 0;     // m
+  double support_kx = 0;             // N/m (support-compliance) on `support_blocks`
+  double support_ky = 0;             // N/m
+  double support_kr = 0;             // N m/rad
+  std::string support_blocks;        // comma-separated fixed blocks; empty = every fixed block
+  std::string gap_joint;             // "blockA/blockB" (joint-gap)
+  double gap_intrados = 0;           // m
+  double gap_extrados = 0;           // m
+  double beam_kr = 0;                // N m/rad on the loaded block (boundary-restraint)
+};
+// Writes the options into the scene and validates it (SceneError naming the option's key).
+void apply_effects(Scene& scene, const EffectOptions& effects);
+
 // Segmental arch of equal voussoirs with radial joints between two fixed abutment blocks.
 // The geometry follows from the clear span and rise at the intrados: for the defaults an intrados
 // radius of 0.65 m and an opening half-angle of 67.38 deg.
@@ -28,6 +50,7 @@ struct ArchOptions {
   std::string load = "point";        // "point" | "none"
   double max_time = 0;               // s; 0 = travel time x 1.5 + 5 s
   double abutment_depth = 0.3;       // extent of each abutment block below and beside the springing (m)
+  EffectOptions effects;             // all off: the published model
 
   void Validate() const;  // throws SceneError naming the flag
 };
@@ -71,6 +94,7 @@ struct WallOptions {
   // rig); stiff against the walls (15-50 kN/mm measured) without ringing at the time step.
   double actuator_stiffness = 2e8;
   double max_time = 0;             // s; 0 = travel time x 1.5 + 5 s
+  EffectOptions effects;           // all off: the plain model
 
   void Validate() const;
 };

@@ -28,15 +28,63 @@ class SceneError : public std::runtime_error {
   std::string where_;
 };
 
-// Contact law parameters of one joint group (Mohr-Coulomb, no cohesion, no tension by default).
-// Later effects (cohesion, tension cut-off, residual friction, nonlinear closure, crushing cap)
-// are added here as options whose defaults leave the plain law unchanged.
+// Contact law parameters of one joint group: Mohr-Coulomb, no cohesion, no tension by default.
+// The effects below are options of the group; each is OFF at its default value, and a group with
+// every effect off runs the plain law with bit-identical results (and the same scene hash).
+// JSON keys and set_parameter names are given after each field; the file format is in
+// docs/scene-format.md, the physics in docs/engine.md.
 struct JointMaterial {
   double normal_stiffness = 4e9;      // kn, Pa/m (force per unit area per unit penetration)
   double shear_stiffness = 1.6e9;     // ks, Pa/m
   double friction_angle = 0.5323254;  // phi, rad (30.5 deg)
 
+  // joint-closure (`closure_max`, m; 0 = off): Bandis-Barton hyperbolic closure of a rough joint,
+  // Fn = kn A d / (1 - d / closure_max) with kn the initial stiffness. The hyperbola is followed up
+  // to the closure where its tangent stiffness reaches kClosureStiffening x kn (3/4 of closure_max),
+  // then continued linearly with that tangent, so that an explicit step can never meet the asymptote.
+  double closure_max = 0;
+  static constexpr double kClosureStiffening = 16;
+
+  // friction-softening (on when `slip_softening` > 0): the friction coefficient falls linearly
+  // with a node's accumulated sliding from tan(friction_angle) to tan(friction_residual), reached
+  // after `slip_softening` (m) of slip. JSON/parameter `friction_residual_deg` (degrees).
+  double friction_residual = 0;  // rad, in [0, friction_angle]
+  double slip_softening = 0;     // m; 0 = off
+
+  // cohesion (on when either is > 0): a bond present at the start of the run carries cohesion
+  // `cohesion` (Pa: shear limit c A + tan(phi) Fn) and tension up to `tensile_strength` (Pa). A node
+  // whose bond fails in tension or shear is broken for good (brittle) and follows the plain law.
+  double cohesion = 0;          // Pa
+  double tensile_strength = 0;  // Pa
+
+  // crushing-cap (on when `compressive_strength` > 0): the normal stress at a node cannot exceed
+  // `compressive_strength` (Pa); plastic closure beyond it lowers the strength linearly to zero
+  // over `crushing_softening` (m) of plastic closure (0: a perfectly plastic cap, no softening).
+  double compressive_strength = 0;  // Pa
+  double crushing_softening = 0;    // m
+
+  bool closure_on() const { return closure_max > 0; }
+  bool softening_on() const { return slip_softening > 0; }
+  bool cohesion_on() const { return cohesion > 0 || tensile_strength > 0; }
+  bool crushing_on() const { return compressive_strength > 0; }
+  bool plain() const { return !closure_on() && !softening_on() && !cohesion_on() && !crushing_on(); }
+
   void Validate(const std::string& where) const;  // throws SceneError naming the value
+};
+
+// joint-gap: an initial opening at one joint (imperfect fit, lost mortar). The opening varies
+// linearly from `intrados` at one end of the joint to `extrados` at the other (uniform when equal).
+// The intrados end is the end of the shared edge with the lower y at the start (for a level joint,
+// the one with the lower x): for the radial joints of an arch whose centre lies below, the inner end.
+// The joint is a scene option (`joint_gap.joint`, "blockA/blockB" in either order, the two blocks
+// must share an edge at the start); only the two openings are numeric parameters
+// (`gap_intrados`, `gap_extrados`). Off while `joint` is empty.
+struct JointGap {
+  std::string joint;      // "voussoir_9/voussoir_10"
+  double intrados = 0;    // m, >= 0
+  double extrados = 0;    // m, >= 0
+  static constexpr double kMaxOpening = 0.01;  // m: larger openings are not a fit imperfection
+  bool on() const { return !joint.empty(); }
 };
 
 // Which joint group a contact between two blocks belongs to. Blocks carry a label ("voussoir",
@@ -58,6 +106,22 @@ struct Block {
   bool fixed = false;              // no motion at all (supports, abutments, base)
   bool fixed_rotation = false;     // translation free, rotation held (e.g. a top beam kept level)
   bool gravity = true;             // false: the block's weight is not applied (loading devices)
+
+  // support-compliance (fixed blocks only; on when any is > 0): the block rests on springs to its
+  // start position at its centroid instead of being rigid. A stiffness of 0 keeps that direction
+  // rigid. The support's own weight is taken by its foundation before the run (not applied), so
+  // the springs answer only to what the structure puts on them. JSON keys and parameter names
+  // `<block>.support_kx` etc.
+  double support_kx = 0;  // N/m, horizontal
+  double support_ky = 0;  // N/m, vertical
+  double support_kr = 0;  // N m/rad, rotation about the centroid
+  // boundary-restraint (free blocks only; on when > 0): a rotational spring to the start angle,
+  // N m/rad (the wall's top beam, neither fixed nor free in rotation). When on, the rotation is
+  // free against this spring whatever `fixed_rotation` says. Parameter `beam_kr` (the loaded
+  // block) or `<block>.beam_kr`.
+  double beam_kr = 0;
+
+  bool compliant_support() const { return fixed && (support_kx > 0 || support_ky > 0 || support_kr > 0); }
 };
 
 struct ContactSettings {
@@ -120,6 +184,7 @@ struct Scene {
   SolverSettings solver;
   Loading loading;
   std::vector<Gauge> gauges;
+  JointGap joint_gap;  // joint-gap effect, off by default
 
   // Checks everything a run needs (names, convexity, orientation, areas, overlaps at start,
   // finite positive values) and throws SceneError naming the key or block.
@@ -136,10 +201,19 @@ void save_scene(const Scene& scene, const std::string& path);
 // Stable hash of everything that affects a simulation (hex string); archives key runs by it.
 std::string scene_hash(const Scene& scene);
 
-// Calibration parameters by name: "kn", "ks" (Pa/m), "friction_deg" (degrees) set every joint
-// group; "<group>.kn", "<group>.ks", "<group>.friction_deg" set one. Unknown names throw SceneError.
+// Calibration parameters by name. Joint-group parameters: "kn", "ks" (Pa/m), "friction_deg"
+// (degrees) and the effect parameters "closure_max" (m), "friction_residual_deg" (degrees),
+// "slip_softening" (m), "cohesion", "tensile_strength", "compressive_strength" (Pa),
+// "crushing_softening" (m): a bare name sets every joint group, "<group>.<name>" one group.
+// Support springs by block: "<block>.support_kx", "<block>.support_ky" (N/m), "<block>.support_kr"
+// (N m/rad); bare, they set every fixed block. "beam_kr" (N m/rad) sets the loaded block's
+// rotational spring, "<block>.beam_kr" any free block's. "gap_intrados", "gap_extrados" (m) set
+// the openings of the scene's joint gap (the joint itself is the scene option joint_gap.joint).
+// Unknown names throw SceneError; values are checked by Scene::Validate, not here.
 void set_parameter(Scene& scene, const std::string& name, double value);
 double get_parameter(const Scene& scene, const std::string& name);
+// Every name set_parameter accepts for this scene (joint-group names, the support blocks' springs,
+// beam_kr when the scene has a loaded block, the gap openings when a gap joint is set).
 std::vector<std::string> parameter_names(const Scene& scene);
 
 }  // namespace demcal::dem

@@ -1,0 +1,62 @@
+// The library of physical effects the engine can add to the plain model (dry Mohr-Coulomb joints on
+// rigid supports), described for programs that try them in turn: each effect's name, its physical
+// meaning, its parameters with SI units, physical bounds and a default search range, and a switch
+// that turns it on in a Scene. Every effect is off in a scene until switched on; the law and the
+// options themselves live in scene.hpp (JointMaterial, Block, JointGap) and docs/engine.md.
+#pragma once
+
+#include "demcal/dem/scene.hpp"
+
+#include <string>
+#include <vector>
+
+namespace demcal::dem {
+
+// One numeric parameter of an effect, named as set_parameter's field ("closure_max").
+struct EffectParameter {
+  std::string name;
+  std::string unit;           // SI ("m", "Pa", "N/m", "N m/rad"), or "deg" for the friction angle
+  std::string meaning;        // one line
+  double lower_bound = 0;     // physical bounds Scene::Validate enforces (upper may be +infinity)
+  double upper_bound = 0;
+  double search_min = 0;      // a sensible default calibration range, inside the bounds
+  double search_max = 0;
+  bool log_scale = false;     // search on log10 (ranges spanning decades)
+  double default_value = 0;   // the value enable_effect sets
+};
+
+// What an effect attaches to, and so what enable_effect's `targets` name.
+enum class EffectTarget {
+  joint_groups,    // joint-group names; empty = every group
+  support_blocks,  // fixed blocks; empty = every fixed block
+  joint,           // exactly one joint "blockA/blockB" (two blocks sharing an edge at the start)
+  beam_block,      // one free block; empty = the loaded block (scene.loading.block)
+};
+std::string to_string(EffectTarget target);
+
+struct Effect {
+  std::string name;       // "joint-closure", "friction-softening", "cohesion", "crushing-cap",
+                          // "support-compliance", "joint-gap", "boundary-restraint"
+  std::string meaning;    // one line of physics
+  EffectTarget target = EffectTarget::joint_groups;
+  std::vector<EffectParameter> parameters;
+};
+
+// Every effect, in a fixed order.
+const std::vector<Effect>& effect_registry();
+// The effect of that name; throws SceneError listing the known names.
+const Effect& find_effect(const std::string& name);
+
+// Switches `name` on in `scene` at its parameters' default values, for the given targets (see
+// EffectTarget), and returns the set_parameter names that now control it in this scene, in the
+// order of Effect::parameters (per target): "closure_max" when every group is meant,
+// "arch_joints.closure_max" for one group, "abutment_right.support_kx", "gap_intrados", "beam_kr".
+// A friction residual default above a group's friction angle is lowered to that angle. Throws
+// SceneError for unknown names or targets, and validates the scene afterwards.
+std::vector<std::string> enable_effect(Scene& scene, const std::string& name,
+                                       const std::vector<std::string>& targets = {});
+
+// True when the effect is on anywhere in the scene.
+bool effect_enabled(const Scene& scene, const std::string& name);
+
+}  // namespace demcal::dem

@@ -1,0 +1,481 @@
+// The engine's effects (docs/engine.md), each against a closed-form answer; tolerances are stated
+// with their reasons. Then the effect options in scene files, parameters and the registry.
+#include "demcal/dem/effects.hpp"
+#include "demcal/dem/generators.hpp"
+#include "demcal/dem/simulation.hpp"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <numbers>
+#include <unistd.h>
+
+namespace {
+
+using namespace demcal::dem;
+constexpr double kDeg = std::numbers::pi / 180;
+constexpr double kWidth = 0.2, kLength = 0.2, kArea = kWidth * kLength;  // the joint: 0.2 m x 0.2 m
+
+Block box(const std::string& name, double x0, double y0, double x1, double y1, bool fixed) {
+  Block b;
+  b.name = name;
+  b.density = 2000;
+  b.fixed = fixed;
+  b.vertices = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+  return b;
+}
+
+const BlockState& block_named(const Recording& r, const std::string& name) {
+  for (const auto& b : r.final_blocks)
+    if (b.name == name) return b;
+  throw std::runtime_error("no block " + name);
+}
+
+// A 0.2 x 0.1 m block ("top", 8 kg) on a fixed base, joint 0.2 m long, 0.2 m wide; kn 1e9, ks 4e8.
+Scene block_on_base(double friction_deg = 30) {
+  Scene s;
+  s.width = kWidth;
+  JointMaterial m;
+  m.normal_stiffness = 1e9;
+  m.shear_stiffness = 4e8;
+  m.friction_angle = friction_deg * kDeg;
+  s.joint_groups["joint"] = m;
+  s.default_joint_group = "joint";
+  s.blocks = {box("base", -0.5, -0.1, 0.5, 0, true), box("top", -0.1, 0, 0.1, 0.1, false)};
+  s.solver.collapse_displacement = 1;
+  return s;
+}
+
+// Displacement control of the top block: an actuator at `point` pushing (or pulling) along
+// `direction`, and a gauge at the same point along it.
+void actuate(Scene& s, const Vec2& point, const Vec2& direction, double velocity, double travel, double stiffness,
+             bool compression_only = true) {
+  s.loading.type = "point";
+  s.loading.block = "top";
+  s.loading.point = point;
+  s.loading.direction = direction;
+  s.loading.velocity = velocity;
+  s.loading.max_displacement = travel;
+  s.loading.stiffness = stiffness;
+  s.loading.compression_only = compression_only;
+  s.loading.record_interval = travel / 400;
+  s.solver.max_time = travel / velocity * 1.5 + 2;
+  s.gauges = {{"along", "top", point, direction}};
+}
+
+// Pressing the top block down on the base, no gravity: the gauge reads the joint closure. The
+// travel takes 10 s, against the block's natural period of about 3 ms on the joint: the local
+// damping, which cannot damp ringing while the block keeps moving one way, then leaves the
+// actuator force within 0.2 % of the joint force (measured on the plain joint: 10 % at 0.2 s of
+// loading, 1 % at 2 s, 0.1 % at 20 s; the ringing scales with the loading speed).
+Scene pressed(double travel, double stiffness = 1e9) {
+  Scene s = block_on_base();
+  s.gravity = Vec2::Zero();
+  actuate(s, Vec2(0, 0.1), Vec2(0, -1), travel / 10, travel, stiffness);
+  return s;
+}
+
+TEST(JointClosure, PressedBlockFollowsTheHyperbola) {
+  // Fn = kn A d / (1 - d / dmax) up to 3/4 of dmax, then the tangent 16 kn A continues linearly.
+  // 1 %: the recorded force is the actuator spring's, within 0.2 % of the joint's (see pressed()).
+  const double dmax = 1e-4, kn = 1e9;
+  Scene s = pressed(0.9 * dmax);
+  set_parameter(s, "closure_max", dmax);
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  int checked = 0;
+  for (std::size_t i = 0; i < r.force.size(); ++i) {
+    const double d = r.gauge_values[0][i];
+    if (d < 0.1 * dmax) continue;
+    const double dc = 0.75 * dmax;
+    const double expected = d <= dc ? kn * kArea * d / (1 - d / dmax)
+                                    : kn * kArea * dc / (1 - dc / dmax) + 16 * kn * kArea * (d - dc);
+    EXPECT_NEAR(r.force[i], expected, 0.01 * expected) << "closure " << d;
+    ++checked;
+  }
+  EXPECT_GT(checked, 100);
+  // Against the linear law at the same travel: the stiffened joint carries far more.
+  const Recording plain = simulate(pressed(0.9 * dmax));
+  EXPECT_GT(r.peak_force, 3 * plain.peak_force);
+}
+
+TEST(FrictionSoftening, SlidingResistanceFallsFromPeakToResidualOverTheSlipLength) {
+  // A weighted block pushed along its base at the joint's height (no overturning moment, so every
+  // node carries W/n and slides together). Slip = displacement - elastic shear F / (ks A). Resistance
+  // W (tan phi_r + (tan phi_p - tan phi_r) max(0, 1 - slip / s)). 1.5 % of the peak: the block
+  // accelerates a little as friction falls, and the actuator force carries that inertia; 10 s of
+  // loading keeps the ringing small (see pressed()).
+  const double peak = 35, residual = 20, length = 2e-3;
+  Scene s = block_on_base(peak);
+  set_parameter(s, "friction_residual_deg", residual);
+  set_parameter(s, "slip_softening", length);
+  actuate(s, Vec2(-0.1, 0), Vec2(1, 0), 3e-4, 3e-3, 1e8);
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  const double weight = 2000 * kWidth * 0.02 * 9.81;
+  const double tan_p = std::tan(peak * kDeg), tan_r = std::tan(residual * kDeg);
+  int checked = 0;
+  for (std::size_t i = 0; i < r.force.size(); ++i) {
+    const double slip = r.gauge_values[0][i] - r.force[i] / (4e8 * kArea);
+    if (slip < 0.05 * length) continue;
+    const double expected = weight * (tan_r + (tan_p - tan_r) * std::max(0.0, 1 - slip / length));
+    EXPECT_NEAR(r.force[i], expected, 0.015 * weight * tan_p) << "slip " << slip;
+    ++checked;
+  }
+  EXPECT_GT(checked, 200);
+  EXPECT_NEAR(r.peak_force, weight * tan_p, 0.015 * weight * tan_p);
+  std::printf("softening: peak %.3f N (W tan phi_p %.3f), end %.3f N (W tan phi_r %.3f)\n", r.peak_force,
+              weight * tan_p, r.force.back(), weight * tan_r);
+}
+
+TEST(Cohesion, BondedBlockBreaksAtCohesionTimesAreaPlusFriction) {
+  // Pushed along the joint: every node reaches c a + tan(phi) n at once, so the breaking load is
+  // c A + W tan(phi) and afterwards the plain W tan(phi). 1 %: the recording interval (0.25 um of
+  // travel, 0.3 % of the load) and 10 s of quasi-static loading (see pressed()).
+  const double c = 2e4, phi = 30;
+  Scene s = block_on_base(phi);
+  set_parameter(s, "cohesion", c);
+  actuate(s, Vec2(-0.1, 0), Vec2(1, 0), 1e-5, 1e-4, 1e9);
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  const double weight = 2000 * kWidth * 0.02 * 9.81, friction = weight * std::tan(phi * kDeg);
+  std::printf("cohesion: breaking load %.2f N (c A + W tan phi = %.2f N), end %.2f N\n", r.peak_force,
+              c * kArea + friction, r.force.back());
+  EXPECT_NEAR(r.peak_force, c * kArea + friction, 0.01 * (c * kArea + friction));
+  EXPECT_NEAR(r.force.back(), friction, 0.03 * friction);  // 3 %: still ringing from the brittle drop
+  // The same block without cohesion never carries more than friction.
+  Scene dry = block_on_base(phi);
+  actuate(dry, Vec2(-0.1, 0), Vec2(1, 0), 1e-5, 1e-4, 1e9);
+  EXPECT_LT(simulate(dry).peak_force, 1.02 * friction);
+}
+
+TEST(Cohesion, BondedBlockPulledOffAtTensileStrengthTimesAreaPlusWeight) {
+  // Pulled straight up at the centroid: every node reaches -ft a at once; breaking load ft A + W.
+  // The cohesion keeps the Coulomb limit c A + tan(phi) Fn positive under that tension (with c = 0
+  // a bond cannot hold tension at all). 1 %: as above.
+  const double ft = 1e4;
+  Scene s = block_on_base();
+  set_parameter(s, "tensile_strength", ft);
+  set_parameter(s, "cohesion", 1e5);
+  actuate(s, Vec2(0, 0.05), Vec2(0, 1), 5e-6, 5e-5, 1e9, false);
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  const double weight = 2000 * kWidth * 0.02 * 9.81;
+  std::printf("tension: breaking load %.2f N (ft A + W = %.2f N)\n", r.peak_force, ft * kArea + weight);
+  EXPECT_NEAR(r.peak_force, ft * kArea + weight, 0.01 * (ft * kArea + weight));
+  EXPECT_LT(r.force.back(), 0.5 * r.peak_force);  // broken for good
+}
+
+TEST(CrushingCap, ForceCappedAtStrengthTimesAreaThenFalling) {
+  // Elastic up to fc A (closure fc / kn = 1 mm), then the strength falls linearly to zero over
+  // crushing_softening of plastic closure: F = fc A (1 - d / s) / (1 - fc / (kn s)) for closure d.
+  // 1 %: quasi-static loading through a stiff actuator (1e9 N/m against a softening slope of 1e7).
+  // The block is held level: a softening joint under a free block localises (one side crushes, the
+  // block tips), which is the toe crushing of a wall, not this closed form.
+  const double fc = 1e6, soft = 5e-3, kn = 1e9;
+  Scene s = pressed(4e-3, 1e9);
+  s.blocks[1].fixed_rotation = true;
+  set_parameter(s, "compressive_strength", fc);
+  set_parameter(s, "crushing_softening", soft);
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  EXPECT_NEAR(r.peak_force, fc * kArea, 0.01 * fc * kArea);
+  int checked = 0;
+  for (std::size_t i = 0; i < r.force.size(); ++i) {
+    const double d = r.gauge_values[0][i];
+    if (d < 1.05 * fc / kn) continue;
+    const double expected = fc * kArea * (1 - d / soft) / (1 - fc / (kn * soft));
+    EXPECT_NEAR(r.force[i], expected, 0.01 * fc * kArea) << "closure " << d;
+    ++checked;
+  }
+  EXPECT_GT(checked, 200);
+  std::printf("crushing: peak %.1f N (fc A = %.1f N), end %.1f N at %.2f mm\n", r.peak_force, fc * kArea,
+              r.force.back(), 1e3 * r.gauge_values[0].back());
+  // Without softening the cap is a plateau.
+  Scene flat = pressed(3e-3, 1e9);
+  flat.blocks[1].fixed_rotation = true;
+  set_parameter(flat, "compressive_strength", fc);
+  const Recording p = simulate(flat);
+  ASSERT_EQ(p.status, RunStatus::completed) << p.message;
+  EXPECT_NEAR(p.force.back(), fc * kArea, 0.01 * fc * kArea);
+}
+
+TEST(SupportCompliance, SupportMovesByThrustOverSpringStiffness) {
+  // A block pushed by a constant 1 kN against a support on a 1e7 N/m horizontal spring (vertical
+  // and rotation held): at equilibrium the support has moved F / kx = 0.1 mm. 0.5 %: equilibrium
+  // is reached to a ratio of 1e-7 of the load; nothing else enters.
+  const double force = 1000, kx = 1e7;
+  Scene s;
+  s.width = kWidth;
+  s.gravity = Vec2::Zero();
+  s.joint_groups["joint"] = JointMaterial{};
+  s.blocks = {box("pusher", -0.1, 0, 0.1, 0.1, false), box("support", 0.1, 0, 0.3, 0.1, true)};
+  s.blocks[1].support_kx = kx;
+  s.loading.constant_forces.push_back({"pusher", Vec2(force, 0), Vec2(-0.1, 0.05)});
+  s.solver.equilibrium_ratio = 1e-7;
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  const BlockState& support = block_named(r, "support");
+  EXPECT_NEAR(support.displacement.x(), force / kx, 0.005 * force / kx);
+  EXPECT_EQ(support.displacement.y(), 0.0);
+  EXPECT_EQ(support.rotation, 0.0);
+  EXPECT_TRUE(support.fixed);
+  // Rigid (the default): the support does not move at all.
+  s.blocks[1].support_kx = 0;
+  EXPECT_EQ(block_named(simulate(s), "support").displacement.x(), 0.0);
+}
+
+TEST(JointGap, NoForceUntilTheGapClosesThenThePlainLaw) {
+  // Uniform opening g: F = 0 for d < g, then kn A (d - g). 1 % of the final force: before contact
+  // the actuator only drives the free block's 8 kg at constant speed.
+  const double g = 2e-4, kn = 1e9;
+  Scene s = pressed(4e-4);
+  s.joint_gap = {"top/base", g, g};
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  const double scale = kn * kArea * (4e-4 - g);
+  int before = 0, after = 0;
+  for (std::size_t i = 0; i < r.force.size(); ++i) {
+    const double d = r.gauge_values[0][i];
+    if (d < 0.95 * g) {
+      EXPECT_LT(r.force[i], 0.01 * scale) << "closure " << d;
+      ++before;
+    } else if (d > 1.05 * g) {
+      EXPECT_NEAR(r.force[i], kn * kArea * (d - g), 0.01 * scale) << "closure " << d;
+      ++after;
+    }
+  }
+  EXPECT_GT(before, 100);
+  EXPECT_GT(after, 100);
+}
+
+TEST(JointGap, WedgeClosesFromTheIntradosEnd) {
+  // A level joint: the intrados end is the left one. Opening 0 there, g at the right, the block
+  // held level: contact over a growing share d / g of the length, F = kn w L d^2 / (2 g); once
+  // closed everywhere F = kn w L (d - g / 2). 101 nodes: the trapezoid rule is exact for the linear
+  // profile after closure (1 %) and within 2 % of the quadratic one before it.
+  const double g = 4e-4, kn = 1e9;
+  Scene s = pressed(6e-4);
+  s.contact.points_per_joint = 101;
+  s.blocks[1].fixed_rotation = true;
+  s.joint_gap = {"base/top", 0, g};
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  int checked = 0;
+  for (std::size_t i = 0; i < r.force.size(); ++i) {
+    const double d = r.gauge_values[0][i];
+    if (d > 1.02 * g) {
+      const double expected = kn * kWidth * kLength * (d - g / 2);
+      EXPECT_NEAR(r.force[i], expected, 0.01 * expected) << "closure " << d;
+      ++checked;
+    } else if (d > 0.4 * g && d < 0.9 * g) {
+      const double expected = kn * kWidth * kLength * d * d / (2 * g);
+      EXPECT_NEAR(r.force[i], expected, 0.02 * expected) << "closure " << d;
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 150);
+}
+
+TEST(BoundaryRestraint, MomentEqualsSpringTimesRotation) {
+  // A free block under a pure couple M on a rotational spring kr: rotation M / kr = 1 mrad. 0.5 %:
+  // the forces keep their world direction while the block turns, a relative error of 1 - cos(1e-3).
+  const double kr = 1e5, moment = 100;
+  Scene s;
+  s.width = kWidth;
+  s.gravity = Vec2::Zero();
+  s.joint_groups["joint"] = JointMaterial{};
+  s.blocks = {box("beam", -0.1, 0, 0.1, 0.1, false)};
+  s.blocks[0].beam_kr = kr;
+  s.blocks[0].fixed_rotation = true;  // released by the spring
+  s.loading.constant_forces = {{"beam", Vec2(0, -moment / 0.1), Vec2(0.05, 0.1)},
+                               {"beam", Vec2(0, moment / 0.1), Vec2(-0.05, 0.1)}};
+  s.solver.equilibrium_ratio = 1e-8;
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  EXPECT_NEAR(-block_named(r, "beam").rotation, moment / kr, 0.005 * moment / kr);
+}
+
+TEST(Effects, EveryEffectOffKeepsTheSceneTextAndHash) {
+  const Scene arch = make_arch(ArchOptions{});
+  const nlohmann::json j = scene_to_json(arch);
+  for (const char* key : {"closure_max", "slip_softening", "friction_residual_deg", "cohesion", "tensile_strength",
+                          "compressive_strength", "crushing_softening"})
+    EXPECT_FALSE(j["joint_groups"]["arch_joints"].contains(key)) << key;
+  EXPECT_FALSE(j.contains("joint_gap"));
+  for (const auto& b : j["blocks"]) EXPECT_FALSE(b.contains("support_kx") || b.contains("beam_kr"));
+  // The hashes of the default scenes before the effects existed (archives stay valid).
+  EXPECT_EQ(scene_hash(arch), "1b0c331c56079525");
+  EXPECT_EQ(scene_hash(make_wall(WallOptions{})), "cfb0093eb804b0a9");
+}
+
+TEST(Effects, OptionsRoundTripThroughJsonAndChangeTheHash) {
+  Scene s = make_arch(ArchOptions{});
+  const std::string plain = scene_hash(s);
+  set_parameter(s, "closure_max", 1e-4);
+  set_parameter(s, "arch_joints.friction_residual_deg", 20);
+  set_parameter(s, "arch_joints.slip_softening", 1e-3);
+  set_parameter(s, "cohesion", 1e4);
+  set_parameter(s, "tensile_strength", 5e3);
+  set_parameter(s, "compressive_strength", 2e7);
+  set_parameter(s, "crushing_softening", 1e-3);
+  set_parameter(s, "abutment_right.support_kx", 1e8);
+  set_parameter(s, "abutment_right.support_kr", 1e7);
+  s.joint_gap.joint = "voussoir_9/voussoir_10";
+  set_parameter(s, "gap_intrados", 0);
+  set_parameter(s, "gap_extrados", 1e-3);
+  set_parameter(s, "beam_kr", 1e6);  // the loaded voussoir
+  const Scene back = scene_from_json(scene_to_json(s), "roundtrip");
+  EXPECT_EQ(scene_hash(back), scene_hash(s));
+  EXPECT_NE(scene_hash(s), plain);
+  for (const auto& name : parameter_names(s)) EXPECT_DOUBLE_EQ(get_parameter(back, name), get_parameter(s, name)) << name;
+  EXPECT_NEAR(get_parameter(back, "arch_joints.friction_residual_deg"), 20, 1e-12);
+  EXPECT_EQ(get_parameter(back, "abutment_joints.slip_softening"), 0);
+  EXPECT_EQ(get_parameter(back, "abutment_right.support_kx"), 1e8);
+  EXPECT_EQ(get_parameter(back, "abutment_left.support_kx"), 0);
+  EXPECT_EQ(get_parameter(back, "beam_kr"), 1e6);
+  EXPECT_EQ(back.blocks[back.block_index("voussoir_5")].beam_kr, 1e6);
+  EXPECT_EQ(get_parameter(back, "gap_extrados"), 1e-3);
+}
+
+void expect_invalid(Scene s, const std::string& needle) {
+  try {
+    s.Validate("s.json");
+    ADD_FAILURE() << "accepted; expected an error with " << needle;
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
+TEST(Effects, ValidateNamesTheKeyAndTheValue) {
+  const Scene arch = make_arch(ArchOptions{});
+  Scene s = arch;
+  set_parameter(s, "arch_joints.slip_softening", 1e-3);
+  set_parameter(s, "arch_joints.friction_residual_deg", 40);
+  expect_invalid(s, "joint_groups.arch_joints.friction_residual_deg: must be in [0, friction_deg = 30.5] degrees, got 40");
+  s = arch;
+  set_parameter(s, "closure_max", 0.02);
+  expect_invalid(s, "closure_max: must be at most 0.01");
+  s = arch;
+  set_parameter(s, "abutment_joints.cohesion", -5);
+  expect_invalid(s, "joint_groups.abutment_joints.cohesion: must not be negative, got -5");
+  s = arch;
+  set_parameter(s, "compressive_strength", 2e9);
+  expect_invalid(s, "compressive_strength: must be at most 1000000000");
+  s = arch;
+  set_parameter(s, "abutment_left.support_ky", -1);
+  expect_invalid(s, "'abutment_left'.support_ky: must not be negative, got -1");
+  s = arch;
+  s.blocks[3].support_kx = 1e6;  // a voussoir is free
+  expect_invalid(s, "apply to fixed blocks only");
+  s = arch;
+  s.joint_gap = {"voussoir_9/voussoir_11", 1e-4, 1e-4};
+  expect_invalid(s, "joint_gap.joint: blocks of 'voussoir_9/voussoir_11' share no edge");
+  s.joint_gap = {"voussoir_9/nothing", 1e-4, 1e-4};
+  expect_invalid(s, "does not name two different blocks");
+  s.joint_gap = {"voussoir_9/voussoir_10", 0.02, 0};
+  expect_invalid(s, "joint_gap.intrados: must be at most 0.01");
+  EXPECT_THROW(set_parameter(s, "voussoir_3.support_kx", 1), SceneError);   // a free block
+  EXPECT_THROW(set_parameter(s, "abutment_left.beam_kr", 1), SceneError);   // a fixed block
+  Scene no_gap = arch;
+  EXPECT_THROW(set_parameter(no_gap, "gap_intrados", 1e-4), SceneError);
+}
+
+TEST(EffectRegistry, EveryEffectSwitchesOnAndRunsTheReferenceArch) {
+  ASSERT_EQ(effect_registry().size(), 7u);
+  EXPECT_THROW(find_effect("magic"), SceneError);
+  ArchOptions o;
+  o.max_displacement = 0.003;
+  o.contacts_per_joint = 5;
+  const Scene plain = make_arch(o);
+  for (const Effect& effect : effect_registry()) {
+    Scene s = plain;
+    EXPECT_FALSE(effect_enabled(s, effect.name)) << effect.name;
+    std::vector<std::string> targets;
+    if (effect.target == EffectTarget::joint) targets = {"voussoir_9/voussoir_10"};
+    if (effect.target == EffectTarget::support_blocks) targets = {"abutment_right"};
+    const auto controls = enable_effect(s, effect.name, targets);
+    EXPECT_TRUE(effect_enabled(s, effect.name)) << effect.name;
+    EXPECT_NE(scene_hash(s), scene_hash(plain)) << effect.name;
+    ASSERT_FALSE(controls.empty());
+    const auto names = parameter_names(s);
+    for (const auto& c : controls) EXPECT_NE(std::find(names.begin(), names.end(), c), names.end()) << c;
+    for (const EffectParameter& p : effect.parameters) {
+      EXPECT_LE(p.lower_bound, p.search_min) << p.name;
+      EXPECT_LT(p.search_min, p.search_max) << p.name;
+      EXPECT_LE(p.search_max, p.upper_bound) << p.name;
+      EXPECT_GE(p.default_value, p.search_min) << p.name;
+      EXPECT_LE(p.default_value, p.search_max) << p.name;
+      EXPECT_FALSE(p.unit.empty());
+    }
+    const Recording r = simulate(s);
+    std::printf("%-20s %-10s peak %.0f N (controls:", effect.name.c_str(), to_string(r.status).c_str(), r.peak_force);
+    for (const auto& c : controls) std::printf(" %s", c.c_str());
+    std::printf(")\n");
+    EXPECT_TRUE(r.status == RunStatus::completed || r.status == RunStatus::collapsed) << effect.name << ": " << r.message;
+  }
+  Scene s = plain;
+  EXPECT_EQ(enable_effect(s, "joint-closure", {"abutment_joints"}), std::vector<std::string>{"abutment_joints.closure_max"});
+  EXPECT_EQ(get_parameter(s, "arch_joints.closure_max"), 0);
+  EXPECT_THROW(enable_effect(s, "joint-gap"), SceneError);
+  EXPECT_THROW(enable_effect(s, "support-compliance", {"voussoir_2"}), SceneError);
+}
+
+std::pair<int, std::string> run_demcal(const std::string& args) {
+  const std::string command = std::string(DEMCAL_BINARY) + " " + args + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  std::string output;
+  char buffer[4096];
+  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
+  const int status = pclose(pipe);
+  return {WEXITSTATUS(status), output};
+}
+
+TEST(EffectFlags, SceneCommandWritesEveryOption) {
+  const auto dir = std::filesystem::temp_directory_path() / ("demcal_effects_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string arch = (dir / "arch.json").string(), wall = (dir / "wall.json").string();
+  auto r = run_demcal("scene arch --closure-max 1e-4 --friction-residual-deg 20 --slip-softening 2e-3 --cohesion 1e4 "
+                      "--tensile-strength 5e3 --compressive-strength 2e7 --crushing-softening 1e-3 --support-kx 1e8 "
+                      "--support-kr 1e7 --support-blocks abutment_right --gap-joint voussoir_9/voussoir_10 "
+                      "--gap-extrados 1e-3 --beam-kr 1e6 -o " + arch);
+  ASSERT_EQ(r.first, 0) << r.second;
+  const Scene a = load_scene(arch);
+  for (const auto& group : {"arch_joints", "abutment_joints"}) {
+    const JointMaterial& m = a.joint_groups.at(group);
+    EXPECT_EQ(m.closure_max, 1e-4);
+    EXPECT_NEAR(m.friction_residual, 20 * kDeg, 1e-12);
+    EXPECT_EQ(m.slip_softening, 2e-3);
+    EXPECT_EQ(m.cohesion, 1e4);
+    EXPECT_EQ(m.tensile_strength, 5e3);
+    EXPECT_EQ(m.compressive_strength, 2e7);
+    EXPECT_EQ(m.crushing_softening, 1e-3);
+  }
+  EXPECT_EQ(a.blocks[a.block_index("abutment_right")].support_kx, 1e8);
+  EXPECT_EQ(a.blocks[a.block_index("abutment_right")].support_kr, 1e7);
+  EXPECT_EQ(a.blocks[a.block_index("abutment_left")].support_kx, 0);
+  EXPECT_EQ(a.joint_gap.joint, "voussoir_9/voussoir_10");
+  EXPECT_EQ(a.joint_gap.extrados, 1e-3);
+  EXPECT_EQ(a.blocks[a.block_index("voussoir_5")].beam_kr, 1e6);
+
+  r = run_demcal("scene wall --support-ky 1e9 --beam-kr 2e6 -o " + wall);
+  ASSERT_EQ(r.first, 0) << r.second;
+  const Scene w = load_scene(wall);
+  EXPECT_EQ(w.blocks[w.block_index("base")].support_ky, 1e9);
+  EXPECT_EQ(w.blocks[w.block_index("beam")].beam_kr, 2e6);
+
+  r = run_demcal("scene arch --friction-residual-deg 40 --slip-softening 1e-3 -o " + arch);
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.second.find("friction_residual_deg: must be in [0, friction_deg = 30.5] degrees, got 40"), std::string::npos)
+      << r.second;
+  r = run_demcal("scene arch --gap-extrados 1e-3 -o " + arch);
+  EXPECT_NE(r.first, 0);
+  EXPECT_NE(r.second.find("--gap-joint"), std::string::npos) << r.second;
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
