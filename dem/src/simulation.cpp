@@ -90,11 +90,12 @@ struct Contact {
   bool active = false;  // within the search margin in the previous step (shear history valid)
   bool seen = false;    // within the search margin in this step
   std::vector<double> shear;  // stored shear force per node (N)
-  std::vector<NodeHistory> history;  // per node, only for joint groups with an effect on
   std::vector<double> gap;    // last gap per node (m), for reports
   // Joint history since the gauges were zeroed.
   double slip = 0;
   bool ever_touched = false;
+  std::vector<NodeHistory> history;  // per node, only for joint groups with an effect on (kept last:
+                                     // the plain law's hot fields keep their place)
 };
 
 struct GroupLaw {
@@ -129,6 +130,15 @@ class Engine {
   int group_for(const Body& a, const Body& b, const Vec2& normal) const;
   void compute_forces();
   void process_pair(int ia, int ib);
+  // Geometry of one edge or corner contact's nodes, for the node loop with effects.
+  struct NodeLayout {
+    Vec2 r1, tr, normal, normal_ab, tangent_ab;
+    bool ref_on_a = true;
+    bool gap_joint = false;
+  };
+  [[gnu::noinline]] void process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
+                                                    const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                                    const std::vector<double>& gaps, const std::vector<double>& lengths);
   void integrate();
   double unbalanced_ratio() const;
   double actuator_force() const;
@@ -139,6 +149,7 @@ class Engine {
 
   const Scene& scene_;
   std::vector<Body> bodies_;
+  std::vector<int> spring_bodies_;  // bodies with support springs or a rotational restraint
   std::vector<GroupLaw> groups_;
   std::unordered_map<std::uint64_t, Contact> contacts_;
   std::vector<std::pair<int, int>> pairs_;
@@ -219,6 +230,7 @@ void Engine::build_bodies() {
     }
     body.update_world();
     if (body.counts_weight) max_weight_ = std::max(max_weight_, body.mass * scene_.gravity.norm());
+    if (body.springs) spring_bodies_.push_back(static_cast<int>(bodies_.size()));
     bodies_.push_back(std::move(body));
   }
 }
@@ -444,14 +456,13 @@ void Engine::process_pair(int ia, int ib) {
   contact.ref_on_a = ref_on_a;
   contact.gap.resize(count);
 
-  const MohrCoulombLaw& law = group.law;
-  const bool plain = group.plain;
-  const bool gap_joint = has_gap_ && key == gap_key_;
-  Vec2 gap_from = Vec2::Zero(), gap_along = Vec2::Zero();
-  if (gap_joint) {  // the joint's ends at the start, carried by block a
-    gap_from = a.to_world(gap_intrados_local_);
-    gap_along = a.to_world(gap_extrados_local_) - gap_from;
+  if (!group.plain || (has_gap_ && key == gap_key_)) {
+    const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, has_gap_ && key == gap_key_};
+    process_nodes_with_effects(a, b, contact, group, layout, s_nodes, gaps, lengths);
+    return;
   }
+  // The plain law: every joint group without effects, exactly as the engine was before them.
+  const MohrCoulombLaw& law = group.law;
   double slip_weighted = 0, length_total = 0;
   bool touching = false;
   // The pair's resultant: force on b and its moment about the origin, applied once at the end.
@@ -460,22 +471,14 @@ void Engine::process_pair(int ia, int ib) {
   for (int k = 0; k < count; ++k) {
     // Nodes are stored in the order of increasing coordinate along tangent_ab.
     const int slot = ref_on_a ? k : count - 1 - k;
-    double gap = gaps[k];
-    const Vec2 point = r1 + s_nodes[k] * tr + 0.5 * gap * normal;
-    if (gap_joint) {
-      const double t = std::clamp((point - gap_from).dot(gap_along) / gap_along.squaredNorm(), 0.0, 1.0);
-      gap += scene_.joint_gap.intrados + t * (scene_.joint_gap.extrados - scene_.joint_gap.intrados);
-    }
+    const double gap = gaps[k];
     contact.gap[slot] = gap;
-    // A bond exists only where the faces touch at the start (within 1 um).
-    if (first_step_ && !plain) contact.history[slot].bonded = group.effects.bonds() && gap <= 1e-6;
+    const Vec2 point = r1 + s_nodes[k] * tr + 0.5 * gap * normal;
     NodeKinematics kin;
     kin.penetration = -gap;
     kin.area = lengths[k] * scene_.width;
-    if (kin.penetration > 0 || (!plain && contact.history[slot].bonded))
-      kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(tangent_ab) * dt_;
-    const NodeForces f =
-        plain ? law.evaluate(kin, contact.shear[slot]) : group.effects.evaluate(kin, contact.shear[slot], contact.history[slot]);
+    if (kin.penetration > 0) kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(tangent_ab) * dt_;
+    const NodeForces f = law.evaluate(kin, contact.shear[slot]);
     ++node_updates_;
     if (f.normal == 0) continue;
     touching = true;
@@ -495,15 +498,69 @@ void Engine::process_pair(int ia, int ib) {
   if (touching && loading_stage_) contact.ever_touched = true;
 }
 
+// The node loop of a joint group with effects on (EffectLaw and its node history), or of the gap
+// joint (whose group may be plain).
+void Engine::process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
+                                        const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                        const std::vector<double>& gaps, const std::vector<double>& lengths) {
+  const int count = static_cast<int>(s_nodes.size());
+  const bool plain = group.plain;
+  double slip_weighted = 0, length_total = 0;
+  bool touching = false;
+  Vec2 resultant = Vec2::Zero();
+  double moment = 0;
+  Vec2 gap_from = Vec2::Zero(), gap_along = Vec2::Zero();
+  if (layout.gap_joint) {  // the joint's ends at the start, carried by block a
+    gap_from = a.to_world(gap_intrados_local_);
+    gap_along = a.to_world(gap_extrados_local_) - gap_from;
+  }
+  for (int k = 0; k < count; ++k) {
+    const int slot = layout.ref_on_a ? k : count - 1 - k;
+    double gap = gaps[k];
+    const Vec2 point = layout.r1 + s_nodes[k] * layout.tr + 0.5 * gap * layout.normal;
+    if (layout.gap_joint) {
+      const double t = std::clamp((point - gap_from).dot(gap_along) / gap_along.squaredNorm(), 0.0, 1.0);
+      gap += scene_.joint_gap.intrados + t * (scene_.joint_gap.extrados - scene_.joint_gap.intrados);
+    }
+    contact.gap[slot] = gap;
+    // A bond exists only where the faces touch at the start (within 1 um).
+    if (first_step_ && !plain) contact.history[slot].bonded = group.effects.bonds() && gap <= 1e-6;
+    NodeKinematics kin;
+    kin.penetration = -gap;
+    kin.area = lengths[k] * scene_.width;
+    if (kin.penetration > 0 || (!plain && contact.history[slot].bonded))
+      kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(layout.tangent_ab) * dt_;
+    const NodeForces f = plain ? group.law.evaluate(kin, contact.shear[slot])
+                               : group.effects.evaluate(kin, contact.shear[slot], contact.history[slot]);
+    ++node_updates_;
+    if (f.normal == 0) continue;
+    touching = true;
+    const Vec2 force_on_b = f.normal * layout.normal_ab + f.shear * layout.tangent_ab;
+    resultant += force_on_b;
+    moment += cross(point, force_on_b);
+    slip_weighted += f.plastic_slip * lengths[k];
+    length_total += lengths[k];
+  }
+  if (touching) {
+    b.force += resultant;
+    b.torque += moment - cross(b.position, resultant);
+    a.force -= resultant;
+    a.torque -= moment - cross(a.position, resultant);
+  }
+  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
+  if (touching && loading_stage_) contact.ever_touched = true;
+}
+
 void Engine::compute_forces() {
   for (Body& b : bodies_) {
     b.force = b.weight;
     b.torque = 0;
-    if (b.springs) {
-      const Vec2 moved = b.position - b.start_position;
-      b.force -= Vec2(b.spring_x * moved.x(), b.spring_y * moved.y());
-      b.torque -= b.spring_r * b.angle;
-    }
+  }
+  for (int i : spring_bodies_) {
+    Body& b = bodies_[i];
+    const Vec2 moved = b.position - b.start_position;
+    b.force -= Vec2(b.spring_x * moved.x(), b.spring_y * moved.y());
+    b.torque -= b.spring_r * b.angle;
   }
   for (const auto& f : constant_forces_) {
     Body& b = bodies_[f.at.body];
@@ -561,8 +618,13 @@ void Engine::integrate() {
   const auto damped = [alpha](double f, double v) { return v == 0 ? f : f - alpha * std::abs(f) * (v > 0 ? 1 : -1); };
   for (Body& b : bodies_) {
     if (b.fixed) continue;
-    if (!b.hold_x) b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
-    if (!b.hold_y) b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
+    if (b.springs) {  // a compliant support may hold a direction
+      if (!b.hold_x) b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
+      if (!b.hold_y) b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
+    } else {
+      b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
+      b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
+    }
     if (!b.fixed_rotation) b.angular_velocity += dt_ * damped(b.torque, b.angular_velocity) / b.inertial_inertia;
     b.position += dt_ * b.velocity;
     b.angle += dt_ * b.angular_velocity;

@@ -25,7 +25,8 @@
 //     "output": "out/arch-demo", "report": true
 //   }
 // Parameter names are those of dem::set_parameter: kn, ks (Pa/m), friction_deg (degrees) for every
-// joint group, "<group>.kn" etc. for one group. Mapped measured columns are converted to SI
+// joint group, "<group>.kn" etc. for one group, and the engine effects' parameters
+// (compressive_strength, abutment_right.support_kx, ...; docs/scene-format.md, "Effects"). Mapped measured columns are converted to SI
 // (m, N): units mm, cm, m, um, N, kN, MN; a column's unit comes from the mapping, else from the
 // file's units row, else SI is assumed.
 #pragma once
