@@ -41,11 +41,11 @@ std::string residual_figure(const ChannelResidual& base, const ChannelResidual* 
   }
   std::ostringstream gp;
   gp << "set multiplot layout 2,1 title '" << base.case_name << ": force against " << base.channel << "'\n"
-     << "set grid\nset xlabel 'displacement (mm)'\nset ylabel 'force (kN)'\nset key left top\n"
+     << "set grid\nset xlabel 'displacement (mm)'\nset ylabel 'force (kN)'\nset key bottom center\n"
      << "plot '" << data.string() << "' u 1:2 w p pt 7 ps 0.4 lc rgb '#888888' t 'measured', "
      << "'' u 1:3 w l lw 2 lc rgb '#1f77b4' t 'base model'";
   if (after) gp << ", '' u 1:4 w l lw 2 lc rgb '#d62728' t '" << after_label << "'";
-  gp << "\nset ylabel 'residual (kN)'\n"
+  gp << "\nset ylabel 'residual (kN)'\nset key below\n"
      << "plot '" << data.string() << "' u 1:($2-$3) w l lw 1.5 lc rgb '#1f77b4' t 'measured - base'";
   if (after) gp << ", '' u 1:($2-$4) w l lw 1.5 lc rgb '#d62728' t 'measured - " << after_label << "'";
   gp << ", " << base.noise / 1e3 << " w l dt 2 lc rgb '#444444' t '+/- noise', " << -base.noise / 1e3
