@@ -314,6 +314,8 @@ void CampaignConfig::Validate() const {
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))
     throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + std::to_string(backend.timeout_s));
+  if (!(backend.max_output_mb > 0) || !std::isfinite(backend.max_output_mb))
+    throw CampaignError(source + ": backend.max_output_mb: must be > 0, got " + std::to_string(backend.max_output_mb));
   if (polish.enabled) {
     try {
       polish.options.Validate();
@@ -351,7 +353,7 @@ json CampaignConfig::to_json() const {
   j["name"] = name;
   j["backend"] = {{"type", backend.type}, {"threads", backend.threads}, {"command", backend.command},
                   {"timeout_s", backend.timeout_s}, {"parallel", backend.parallel},
-                  {"fitness_threads", backend.fitness_threads}};
+                  {"fitness_threads", backend.fitness_threads}, {"max_output_mb", backend.max_output_mb}};
   j["identifiability"] = {{"relative_band", identifiability_band}};
   j["output"] = output;
   j["report"] = report;
@@ -423,7 +425,9 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
     if (b.is_string()) {
       c.backend.type = b.get<std::string>();
     } else {
-      reject_unknown_keys(b, {"type", "threads", "command", "timeout_s", "parallel", "fitness_threads"}, where);
+      reject_unknown_keys(b, {"type", "threads", "command", "timeout_s", "parallel", "fitness_threads", "max_output_mb"},
+                          where);
+      read_field(b, "max_output_mb", c.backend.max_output_mb, where);
       read_field(b, "fitness_threads", c.backend.fitness_threads, where);
       read_field(b, "type", c.backend.type, where);
       read_field(b, "threads", c.backend.threads, where);
