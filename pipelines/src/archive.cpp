@@ -421,6 +421,13 @@ std::int64_t RunArchive::run_count() const {
   return s.integer(0);
 }
 
+std::string RunArchive::integrity_check() const {
+  Statement s(db_, path_, "PRAGMA integrity_check");
+  std::string out;
+  while (s.step()) out += (out.empty() ? "" : "\n") + s.text(0);
+  return out;
+}
+
 std::vector<RunRecord> RunArchive::runs_with_status(const std::string& status) const {
   Statement s(db_, path_,
               "SELECT id, model_hash, param_key, code_version, backend, status, message, wall_time_s,"

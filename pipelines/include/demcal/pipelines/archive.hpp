@@ -135,6 +135,8 @@ class RunArchive {
                                     const std::map<std::string, double>& params) const;
   std::optional<RunRecord> run(std::int64_t id) const;
   std::int64_t run_count() const;
+  // SQLite's PRAGMA integrity_check: "ok", or the problems it lists (one per line).
+  std::string integrity_check() const;
   // Every run with this status ("failed", "unstable", ...), in id order, without curves.
   std::vector<RunRecord> runs_with_status(const std::string& status) const;
 
