@@ -39,13 +39,14 @@ int with_busy_retry(Attempt attempt) {
   }
 }
 
-// Testing aid for crash-safety soaks: DEMCAL_ARCHIVE_WRITE_PAUSE_MS=N makes every write
-// transaction announce itself on stderr ("demcal-archive: write N begins/ends") and pause N ms
-// before its COMMIT, so that a kill -9 can be aimed inside a write. Unset (the default): no effect.
+// Testing aid for crash-safety soaks: with DEMCAL_ARCHIVE_WRITE_PAUSE_MS=N set, every write
+// transaction announces itself on stderr ("demcal-archive: write K begins" / "... ends") and holds
+// its transaction open N ms before COMMIT, so that a kill -9 can be aimed inside a write. Unset
+// (the default): no effect. Returns -1 when unset.
 int write_pause_ms() {
   static const int ms = [] {
     const char* text = std::getenv("DEMCAL_ARCHIVE_WRITE_PAUSE_MS");
-    return text ? std::max(0, std::atoi(text)) : 0;
+    return text ? std::max(0, std::atoi(text)) : -1;
   }();
   return ms;
 }
@@ -301,7 +302,7 @@ void RunArchive::open_schema() {
 
 RunArchive::Transaction::Transaction(RunArchive& archive) : archive_(archive) {
   archive_.exec("BEGIN IMMEDIATE");
-  if (const int ms = write_pause_ms(); ms > 0) {
+  if (write_pause_ms() >= 0) {
     static std::atomic<long> writes{0};
     number_ = ++writes;
     std::cerr << "demcal-archive: write " << number_ << " begins\n" << std::flush;

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <memory>
 #include <condition_variable>
 #include <deque>
@@ -363,6 +364,10 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
       }
     }
   }
+  if (options.resume && options.note_fresh_resume && campaign_id == 0)
+    std::cerr << "demcal: note: --resume: " << archive.path() << " holds no campaign with this configuration (key "
+              << config_key << ": scene, measurement, parameters, objective or optimiser differ from every "
+              << "archived one); starting a new campaign\n";
   if (campaign_id == 0) {
     CampaignRecord record;
     record.name = config.name;

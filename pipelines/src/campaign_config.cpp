@@ -279,6 +279,9 @@ double unit_factor(const std::string& unit, const std::string& where) {
 }
 
 void CampaignConfig::Validate() const {
+  // The backend first: whether a case needs a scene depends on it.
+  if (backend.type != "threads" && backend.type != "command" && backend.type != "mpi")
+    throw CampaignError(source + ": backend.type: unknown backend '" + backend.type + "' (known: threads, command, mpi)");
   if (cases.empty()) throw CampaignError(source + ": no case (give 'scene' and 'measured', or 'cases')");
   std::set<std::string> names;
   for (size_t i = 0; i < cases.size(); ++i) {
@@ -308,8 +311,6 @@ void CampaignConfig::Validate() const {
   } catch (const std::exception& e) {
     throw CampaignError(source + ": " + e.what());
   }
-  if (backend.type != "threads" && backend.type != "command" && backend.type != "mpi")
-    throw CampaignError(source + ": backend.type: unknown backend '" + backend.type + "' (known: threads, command, mpi)");
   if (backend.type == "command" && backend.command.empty())
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))

@@ -157,6 +157,7 @@ dem::Scene build_scene(const SceneSpec& spec, const std::string& where);
 
 struct RunOptions {
   bool resume = false;       // continue the newest campaign with the same key in the archive
+  bool note_fresh_resume = true;  // with resume: say on stderr when nothing matches (a new campaign)
   bool progress = true;      // progress lines on stderr
   int mpi_rank = 0;          // set by the CLI under mpirun
   int mpi_size = 1;
