@@ -6,6 +6,7 @@
 #include "demcal/pipelines/mpi.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <iostream>
 #include <memory>
 
@@ -77,8 +78,11 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
     if (f.backend.empty()) c.backend.type = "command";
   }
   if (f.timeout_given) {
-    if (!(f.timeout >= 0) || !std::isfinite(f.timeout))
-      throw CampaignError("--timeout " + std::to_string(f.timeout) + ": must be a number of seconds >= 0 (0 = none)");
+    if (!(f.timeout >= 0) || !std::isfinite(f.timeout)) {
+      char text[32];
+      std::snprintf(text, sizeof text, "%g", f.timeout);
+      throw CampaignError(std::string("--timeout ") + text + ": must be a number of seconds >= 0 (0 = none)");
+    }
     c.backend.timeout_s = f.timeout;
   }
   if (f.threads >= 0) c.backend.threads = c.backend.parallel = f.threads;

@@ -1,6 +1,9 @@
 #include "demcal/pipelines/archive.hpp"
 
 #include <sqlite3.h>
+#include <unistd.h>
+
+#include <filesystem>
 
 #include <atomic>
 #include <chrono>
@@ -13,6 +16,8 @@
 #include <thread>
 
 namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -216,9 +221,18 @@ smoothing::Curve unpack_curve(const std::vector<std::string>& names, const std::
 RunArchive::RunArchive(const std::string& path) : path_(path) {
   if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
                       nullptr) != SQLITE_OK) {
-    const std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
+    std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
     sqlite3_close(db_);
     db_ = nullptr;
+    // Say what is wrong with the place, where it is something simple.
+    std::error_code ec;
+    const fs::path folder = fs::absolute(fs::path(path), ec).parent_path();
+    if (!fs::exists(folder, ec))
+      why += ": the folder " + folder.string() + " does not exist";
+    else if (!fs::exists(path, ec) && ::access(folder.c_str(), W_OK) != 0)
+      why += ": the folder " + folder.string() + " is not writable";
+    else if (fs::exists(path, ec) && ::access(path.c_str(), R_OK | W_OK) != 0)
+      why += ": the file is not readable and writable";
     throw ArchiveError(path + ": cannot open the run archive (" + why + ")");
   }
   try {

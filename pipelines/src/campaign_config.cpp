@@ -4,6 +4,8 @@
 #include "demcal/dem/generators.hpp"
 
 #include <cmath>
+#include <cstdio>
+#include <type_traits>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -21,6 +23,22 @@ std::string describe(const json& value) {
   return text.size() > 60 ? text.substr(0, 60) + "..." : text;
 }
 
+std::string number_text(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%g", value);
+  return buffer;
+}
+
+// What a field of type T holds, for messages.
+template <class T>
+const char* expected_kind() {
+  if constexpr (std::is_same_v<T, bool>) return "true or false";
+  else if constexpr (std::is_integral_v<T>) return "an integer";
+  else if constexpr (std::is_floating_point_v<T>) return "a number";
+  else if constexpr (std::is_same_v<T, std::string>) return "a string";
+  else return "a value of another type";
+}
+
 // Reads j[key] into out if present, with a message naming where/key and the value on a type error.
 template <class T>
 void read_field(const json& j, const char* key, T& out, const std::string& where) {
@@ -28,7 +46,7 @@ void read_field(const json& j, const char* key, T& out, const std::string& where
   try {
     out = j.at(key).get<T>();
   } catch (const std::exception&) {
-    throw CampaignError(where + "." + key + ": wrong type for value " + describe(j.at(key)));
+    throw CampaignError(where + "." + key + ": expected " + expected_kind<T>() + ", got " + describe(j.at(key)));
   }
   if constexpr (std::is_floating_point_v<T>) {
     if (!std::isfinite(out)) throw CampaignError(where + "." + key + ": value must be finite, got " + describe(j.at(key)));
@@ -314,9 +332,9 @@ void CampaignConfig::Validate() const {
   if (backend.type == "command" && backend.command.empty())
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))
-    throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + std::to_string(backend.timeout_s));
+    throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + number_text(backend.timeout_s));
   if (!(backend.max_output_mb > 0) || !std::isfinite(backend.max_output_mb))
-    throw CampaignError(source + ": backend.max_output_mb: must be > 0, got " + std::to_string(backend.max_output_mb));
+    throw CampaignError(source + ": backend.max_output_mb: must be > 0, got " + number_text(backend.max_output_mb));
   if (polish.enabled) {
     try {
       polish.options.Validate();

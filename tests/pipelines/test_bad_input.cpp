@@ -157,7 +157,7 @@ const std::vector<Entry>& catalogue() {
       {"campaign_unknown_key", campaign_edit([](json& c, const fs::path&) { c["optimiser"]["swarm"] = 3; }),
        {"campaign.json", "optimiser", "'swarm'"}},
       {"campaign_wrong_type", campaign_edit([](json& c, const fs::path&) { c["optimiser"]["population"] = "ten"; }),
-       {"campaign.json", "population", "ten"}},
+       {"campaign.json", "optimiser.population", "expected an integer", "\"ten\""}},
       {"campaign_inverted_bounds",
        campaign_edit([](json& c, const fs::path&) {
          c["parameters"][1]["lower"] = 45;
@@ -175,9 +175,9 @@ const std::vector<Entry>& catalogue() {
        campaign_edit([](json& c, const fs::path&) { c["backend"]["command"] = "sim {kn} {output}"; }),
        {"campaign.json", "backend.command", "{kn}", "known:"}},
       {"campaign_negative_timeout", campaign_edit([](json& c, const fs::path&) { c["backend"]["timeout_s"] = -1; }),
-       {"campaign.json", "backend.timeout_s", "-1"}},
+       {"campaign.json", "backend.timeout_s", "must be >= 0, got -1"}},
       {"campaign_zero_max_output", campaign_edit([](json& c, const fs::path&) { c["backend"]["max_output_mb"] = 0; }),
-       {"campaign.json", "backend.max_output_mb", "0"}},
+       {"campaign.json", "backend.max_output_mb", "must be > 0, got 0"}},
       {"campaign_unknown_backend", campaign_edit([](json& c, const fs::path&) { c["backend"]["type"] = "cloud"; }),
        {"campaign.json", "backend.type", "'cloud'"}},
       // ---- command line ----
@@ -185,7 +185,7 @@ const std::vector<Entry>& catalogue() {
       {"cli_param_not_a_number", flags({"--param", "k=abc:1e9:log"}), {"--param k=abc:1e9:log", "'abc'", "not a finite number"}},
       {"cli_map_unknown_unit", flags({"--map", "force=force:furlong"}), {"furlong"}},
       {"cli_unknown_flag", flags({"--swarmsize", "3"}), {"--swarmsize"}, 109},
-      {"cli_negative_timeout", flags({"--timeout", "-1"}), {"--timeout -1", "must be a number of seconds >= 0"}},
+      {"cli_negative_timeout", flags({"--timeout", "-1"}), {"--timeout -1: must be a number of seconds >= 0"}},
       {"cli_unknown_backend", flags({"--backend", "cloud"}), {"--backend cloud", "'cloud'", "threads, command, mpi"}},
       {"cli_no_campaign", [](const fs::path& dir) { return std::vector<std::string>{"--out", (dir / "out").string()}; },
        {"no campaign", "campaign file", "--scene"}},
@@ -198,9 +198,9 @@ const std::vector<Entry>& catalogue() {
       {"archive_newer_schema", flags({"--archive", "{dir}/future.sqlite"}),
        {"{dir}/future.sqlite", "archive schema version 99", "this demcal reads 1"}},
       {"archive_folder_missing", flags({"--archive", "/no/such/folder/archive.sqlite"}),
-       {"/no/such/folder/archive.sqlite", "cannot open the run archive"}},
+       {"/no/such/folder/archive.sqlite", "cannot open the run archive", "the folder /no/such/folder does not exist"}},
       {"archive_read_only_folder", flags({"--archive", "{dir}/locked/archive.sqlite"}),
-       {"{dir}/locked/archive.sqlite", "cannot open the run archive"}},
+       {"{dir}/locked/archive.sqlite", "cannot open the run archive", "the folder {dir}/locked is not writable"}},
       {"archive_other_configuration", flags({"--archive", "{dir}/other.sqlite", "--resume"}),
        {"note: --resume: {dir}/other.sqlite holds no campaign with this configuration"}, 0},
   };
