@@ -92,6 +92,7 @@ TEST_P(SimulatorFault, RunFailsWithItsReasonAndNothingSurvives) {
     }
     EXPECT_EQ(o.status, "failed") << fault.name;
     EXPECT_EQ(o.curves.rows(), 0u);
+    if (i == 1) RecordProperty("message", o.message);  // quoted in docs/bad-input.md
     for (const auto& needle : fault.needles)
       EXPECT_NE(o.message.find(needle), std::string::npos) << "'" << needle << "' not in: " << o.message;
   }
@@ -128,6 +129,7 @@ TEST(SimulatorFaults, DetachedLeftoverOfAGoodRunIsKilled) {
   CommandBackend backend(faulty_backend("leave-daemon", dir));
   const auto o = backend.run_one({0, {{"k", 2e7}, {"friction_deg", 40}}});
   EXPECT_EQ(o.status, "completed") << o.message;
+  RecordProperty("message", o.message);
   EXPECT_NE(o.message.find("left 1 process(es) running after it exited; killed"), std::string::npos) << o.message;
   const auto pids = pids_in(fs::path(o.details.at("workdir").get<std::string>()) / "pids");
   EXPECT_EQ(pids.size(), 2u);
@@ -141,6 +143,7 @@ TEST(SimulatorFaults, MissingProgramIsAFailedRun) {
   CommandBackend backend(options);
   const auto o = backend.run_one({0, {{"k", 2e7}, {"friction_deg", 40}}});
   EXPECT_EQ(o.status, "failed");
+  RecordProperty("message", o.message);
   EXPECT_NE(o.message.find("cannot run '/no/such/simulator'"), std::string::npos) << o.message;
   EXPECT_NE(o.message.find("No such file"), std::string::npos) << o.message;
 }
