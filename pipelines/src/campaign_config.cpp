@@ -333,8 +333,9 @@ void CampaignConfig::Validate() const {
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))
     throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + number_text(backend.timeout_s));
-  if (!(backend.max_output_mb > 0) || !std::isfinite(backend.max_output_mb))
-    throw CampaignError(source + ": backend.max_output_mb: must be > 0, got " + number_text(backend.max_output_mb));
+  if (!(backend.max_output_mb > 0) || !(backend.max_output_mb <= 1048576))
+    throw CampaignError(source + ": backend.max_output_mb: must be > 0 and <= 1048576 (1 TiB), got " +
+                        number_text(backend.max_output_mb));
   if (polish.enabled) {
     try {
       polish.options.Validate();

@@ -177,7 +177,7 @@ const std::vector<Entry>& catalogue() {
       {"campaign_negative_timeout", campaign_edit([](json& c, const fs::path&) { c["backend"]["timeout_s"] = -1; }),
        {"campaign.json", "backend.timeout_s", "must be >= 0, got -1"}},
       {"campaign_zero_max_output", campaign_edit([](json& c, const fs::path&) { c["backend"]["max_output_mb"] = 0; }),
-       {"campaign.json", "backend.max_output_mb", "must be > 0, got 0"}},
+       {"campaign.json", "backend.max_output_mb", "must be > 0 and <= 1048576 (1 TiB), got 0"}},
       {"campaign_unknown_backend", campaign_edit([](json& c, const fs::path&) { c["backend"]["type"] = "cloud"; }),
        {"campaign.json", "backend.type", "'cloud'"}},
       // ---- command line ----

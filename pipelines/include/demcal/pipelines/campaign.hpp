@@ -86,7 +86,8 @@ struct BackendSpec {
   double timeout_s = 0;                // command backend: s per run, 0 = none
   int parallel = 0;                    // command backend: programs at once, <= 0 = hardware threads
   double max_output_mb = 64;           // command backend: largest file a run may write (output CSV,
-                                       // stdout, stderr), MiB; a run that goes past it fails
+                                       // stdout, stderr), MiB, (0, 1048576]; a run that goes
+                                       // past it fails
   int fitness_threads = 0;             // threads computing objectives (objective 2 trains networks)
                                        // while simulations run; <= 0 = every hardware thread.
                                        // Does not change any result.
