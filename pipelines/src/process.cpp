@@ -73,8 +73,48 @@ void sleep_ms(long ms) {
   ::nanosleep(&t, nullptr);
 }
 
-// SIGKILLs every process whose parent is this one (the supervisor); returns how many.
+// Appends the decimal digits of value to buffer at *at.
+void append_number(char* buffer, int* at, long value) {
+  char digits[24];
+  int n = 0;
+  do digits[n++] = static_cast<char>('0' + value % 10);
+  while ((value /= 10) > 0);
+  while (n > 0) buffer[(*at)++] = digits[--n];
+}
+
+// SIGKILLs every child of this process (the supervisor) listed in /proc/PID/task/PID/children
+// (a single-threaded process: its one task lists them all); -1 when the kernel lacks that file.
+int kill_listed_children(pid_t self) {
+  char path[96] = "/proc/";
+  int at = 6;
+  append_number(path, &at, self);
+  for (const char* c = "/task/"; *c; ++c) path[at++] = *c;
+  append_number(path, &at, self);
+  for (const char* c = "/children"; *c; ++c) path[at++] = *c;
+  path[at] = '\0';
+  const int fd = ::open(path, O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return -1;
+  int killed = 0;
+  long pid = 0;
+  char buffer[1024];
+  for (ssize_t got; (got = ::read(fd, buffer, sizeof buffer)) > 0;)
+    for (ssize_t i = 0; i < got; ++i) {
+      if (buffer[i] >= '0' && buffer[i] <= '9') {
+        pid = pid * 10 + (buffer[i] - '0');
+      } else {
+        if (pid > 0 && ::kill(static_cast<pid_t>(pid), SIGKILL) == 0) ++killed;
+        pid = 0;
+      }
+    }
+  if (pid > 0 && ::kill(static_cast<pid_t>(pid), SIGKILL) == 0) ++killed;
+  ::close(fd);
+  return killed;
+}
+
+// SIGKILLs every process whose parent is this one (the supervisor); returns how many. Reads the
+// kernel's list of children where it has one, else scans /proc/*/stat for the parent pid.
 int kill_own_children(pid_t self) {
+  if (const int killed = kill_listed_children(self); killed >= 0) return killed;
   const int dir = ::open("/proc", O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dir < 0) return 0;
   int killed = 0;
