@@ -587,8 +587,11 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
         if (usable_status(run->status)) {
           const auto f = archive.find_fitness(run->id, prepared.objective_keys[k]);
           if (f && std::isfinite(f->fitness)) continue;  // another case failed this candidate
-          if (f && f->channels.contains("error")) reason = "fitness: " + f->channels["error"].get<std::string>();
-          else if (reason.empty()) reason = "no finite fitness";
+          if (f && f->channels.contains("error")) {
+            const json& error = f->channels.at("error");
+            reason = "fitness: " + (error.is_string() ? error.get<std::string>() : error.dump());
+          }
+          if (reason.empty()) reason = "no finite fitness";
         }
         inputs.failures.push_back({e.iteration, e.position, config.cases[k].name, e.params, run->status, reason});
       }

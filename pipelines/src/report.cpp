@@ -357,7 +357,8 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
   if (!in.failures.empty()) {
     constexpr size_t kListed = 100;
     md << "## Failed runs\n\n" << in.failures.size()
-       << " candidate(s) without a finite fitness; the optimiser ranked them worst and went on.";
+       << " run(s) left their candidate without a finite fitness; the optimiser ranked those candidates worst "
+          "and went on.";
     if (in.failures.size() > kListed) md << " The first " << kListed << " are listed.";
     md << "\n\n| iteration | candidate | case | parameters | status | reason |\n| --- | --- | --- | --- | --- | --- |\n";
     for (size_t i = 0; i < in.failures.size() && i < kListed; ++i) {
