@@ -5,7 +5,7 @@ BUILD ?= build
 JOBS ?= 2
 BUILD_TYPE ?= Release
 
-.PHONY: all deps configure build demo test bench clean
+.PHONY: all deps configure build demo test bench soak clean
 
 all: build
 
@@ -28,6 +28,10 @@ test: build
 
 bench: build
 	bash scripts/bench.sh $(BUILD)
+
+# Crash safety: 20 kills -9 of a campaign, each resumed; result and archive checked (docs/pipelines.md).
+soak: build
+	$(BUILD)/bench/bench_soak --kills 20 --seed 1 --out $(BUILD)/soak
 
 clean:
 	rm -rf $(BUILD)

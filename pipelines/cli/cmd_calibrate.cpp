@@ -6,6 +6,7 @@
 #include "demcal/pipelines/mpi.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <iostream>
 #include <memory>
 
@@ -19,7 +20,8 @@ struct CalibrateFlags {
   long polish = -1;
   long max_simulations = 0;
   long long seed = -1;
-  double timeout = -1;
+  double timeout = 0;
+  bool timeout_given = false;
   bool resume = false, no_report = false, quiet = false;
 };
 
@@ -28,6 +30,9 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
   CampaignConfig c;
   if (!f.campaign_file.empty()) c = load_campaign(f.campaign_file);
   else c.source = "command line";
+  if (f.campaign_file.empty() && f.scene.empty() && f.generator.empty() && f.experiment.empty())
+    throw CampaignError("no campaign: give a campaign file (demcal calibrate campaign.json) or --scene/--generator, "
+                        "--experiment and --param flags");
   if (!f.scene.empty() || !f.generator.empty() || !f.experiment.empty() || !f.mappings.empty()) {
     if (c.cases.size() > 1) throw CampaignError("--scene/--experiment/--map cannot change a campaign with several cases");
     if (c.cases.empty()) c.cases.emplace_back();
@@ -63,12 +68,23 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
   if (f.max_simulations > 0) c.optimiser.max_evaluations = f.max_simulations;
   if (f.seed >= 0) c.optimiser.seed = static_cast<std::uint64_t>(f.seed);
   if (f.objective > 0) c.objective = f.objective;
-  if (!f.backend.empty()) c.backend.type = f.backend;
+  if (!f.backend.empty()) {
+    if (f.backend != "threads" && f.backend != "command" && f.backend != "mpi")
+      throw CampaignError("--backend " + f.backend + ": unknown backend '" + f.backend + "' (known: threads, command, mpi)");
+    c.backend.type = f.backend;
+  }
   if (!f.command.empty()) {
     c.backend.command = f.command;
     if (f.backend.empty()) c.backend.type = "command";
   }
-  if (f.timeout >= 0) c.backend.timeout_s = f.timeout;
+  if (f.timeout_given) {
+    if (!(f.timeout >= 0) || !std::isfinite(f.timeout)) {
+      char text[32];
+      std::snprintf(text, sizeof text, "%g", f.timeout);
+      throw CampaignError(std::string("--timeout ") + text + ": must be a number of seconds >= 0 (0 = none)");
+    }
+    c.backend.timeout_s = f.timeout;
+  }
   if (f.threads >= 0) c.backend.threads = c.backend.parallel = f.threads;
   if (f.fitness_threads >= 0) c.backend.fitness_threads = f.fitness_threads;
   if (f.polish == 0) c.polish.enabled = false;
@@ -137,7 +153,8 @@ void setup(CLI::App& app) {
   sub->add_option("--seed", flags->seed, "Random seed");
   sub->add_option("--backend", flags->backend, "threads | command | mpi");
   sub->add_option("--command", flags->command, "External simulator template (implies --backend command)");
-  sub->add_option("--timeout", flags->timeout, "External command timeout per run (s)");
+  sub->add_option("--timeout", flags->timeout, "External command timeout per run (s)")
+      ->each([flags](const std::string&) { flags->timeout_given = true; });
   sub->add_option("--threads", flags->threads, "Simulations at once (0 = every core)");
   sub->add_option("--fitness-threads", flags->fitness_threads, "Threads computing objectives (0 = every core)");
   sub->add_option("--polish", flags->polish, "Local NLopt polish after the swarm: N simulations (0 = off)");

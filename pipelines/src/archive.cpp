@@ -1,18 +1,60 @@
 #include "demcal/pipelines/archive.hpp"
 
 #include <sqlite3.h>
+#include <unistd.h>
 
+#include <filesystem>
+
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <cstdlib>
+#include <iostream>
+#include <thread>
 
 namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
 
 namespace {
 
 constexpr int kSchemaVersion = 1;
+
+// Another process writing the same archive holds its write lock for one short transaction at a
+// time. SQLite's busy handler waits up to kBusyTimeoutMs per attempt; a statement that still finds
+// the archive locked is retried, with growing pauses, until kMaxBusyWait has passed in all.
+constexpr int kBusyTimeoutMs = 10000;
+constexpr std::chrono::seconds kMaxBusyWait{120};
+
+bool is_busy(int rc) { return (rc & 0xff) == SQLITE_BUSY || (rc & 0xff) == SQLITE_LOCKED; }
+
+// Calls attempt() until it returns something other than BUSY/LOCKED or the bounded wait is over.
+template <class Attempt>
+int with_busy_retry(Attempt attempt) {
+  const auto deadline = std::chrono::steady_clock::now() + kMaxBusyWait;
+  auto pause = std::chrono::milliseconds(5);
+  for (;;) {
+    const int rc = attempt();
+    if (!is_busy(rc) || std::chrono::steady_clock::now() >= deadline) return rc;
+    std::this_thread::sleep_for(pause);
+    pause = std::min(pause * 2, std::chrono::milliseconds(200));
+  }
+}
+
+// Testing aid for crash-safety soaks: with DEMCAL_ARCHIVE_WRITE_PAUSE_MS=N set, every write
+// transaction announces itself on stderr ("demcal-archive: write K begins" / "... ends") and holds
+// its transaction open N ms before COMMIT, so that a kill -9 can be aimed inside a write. Unset
+// (the default): no effect. Returns -1 when unset.
+int write_pause_ms() {
+  static const int ms = [] {
+    const char* text = std::getenv("DEMCAL_ARCHIVE_WRITE_PAUSE_MS");
+    return text ? std::max(0, std::atoi(text)) : -1;
+  }();
+  return ms;
+}
 
 std::string utc_now() {
   const std::time_t now = std::time(nullptr);
@@ -47,7 +89,11 @@ class Statement {
 
   // true while rows come; false at the end.
   bool step() {
-    const int rc = sqlite3_step(stmt_);
+    const int rc = with_busy_retry([&] {
+      const int attempt = sqlite3_step(stmt_);
+      if (is_busy(attempt)) sqlite3_reset(stmt_);
+      return attempt;
+    });
     if (rc == SQLITE_ROW) return true;
     if (rc == SQLITE_DONE) return false;
     fail("step");
@@ -72,7 +118,12 @@ class Statement {
     if (rc != SQLITE_OK) fail("bind");
   }
   [[noreturn]] void fail(const char* what) {
-    throw ArchiveError(path_ + ": SQLite " + what + " failed (" + sqlite3_errmsg(db_) + ") in: " + sql_);
+    const int rc = sqlite3_errcode(db_);
+    throw ArchiveError(path_ + ": SQLite " + what + " failed (" + sqlite3_errmsg(db_) + ")" +
+                       (is_busy(rc) ? " after waiting " + std::to_string(kMaxBusyWait.count()) +
+                                          " s for another process to release the archive"
+                                    : std::string()) +
+                       " in: " + sql_);
   }
   sqlite3* db_;
   const std::string& path_;
@@ -170,15 +221,62 @@ smoothing::Curve unpack_curve(const std::vector<std::string>& names, const std::
 RunArchive::RunArchive(const std::string& path) : path_(path) {
   if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
                       nullptr) != SQLITE_OK) {
-    const std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
+    std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
     sqlite3_close(db_);
     db_ = nullptr;
+    // Say what is wrong with the place, where it is something simple.
+    std::error_code ec;
+    const fs::path folder = fs::absolute(fs::path(path), ec).parent_path();
+    if (!fs::exists(folder, ec))
+      why += ": the folder " + folder.string() + " does not exist";
+    else if (!fs::exists(path, ec) && ::access(folder.c_str(), W_OK) != 0)
+      why += ": the folder " + folder.string() + " is not writable";
+    else if (fs::exists(path, ec) && ::access(path.c_str(), R_OK | W_OK) != 0)
+      why += ": the file is not readable and writable";
     throw ArchiveError(path + ": cannot open the run archive (" + why + ")");
   }
-  sqlite3_busy_timeout(db_, 30000);
-  exec("PRAGMA journal_mode=WAL");
+  try {
+    open_schema();
+  } catch (...) {
+    sqlite3_close(db_);
+    db_ = nullptr;
+    throw;
+  }
+}
+
+void RunArchive::open_schema() {
+  sqlite3_busy_timeout(db_, kBusyTimeoutMs);
+  try {
+    exec("PRAGMA journal_mode=WAL");
+  } catch (const ArchiveError&) {
+    const int rc = sqlite3_errcode(db_);
+    if (rc == SQLITE_NOTADB || rc == SQLITE_CORRUPT)
+      throw ArchiveError(path_ + ": not a demcal run archive: not an SQLite database, or a damaged one (" +
+                         sqlite3_errmsg(db_) + "); move it away or name another file with --archive");
+    throw;
+  }
   exec("PRAGMA synchronous=NORMAL");  // with WAL: durable against a killed process
   exec("PRAGMA foreign_keys=ON");
+  // A database with tables but no demcal schema version belongs to something else: never add ours.
+  {
+    Statement tables(db_, path_, "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name");
+    std::string names;
+    bool has_meta = false;
+    while (tables.step()) {
+      names += (names.empty() ? "" : ", ") + tables.text(0);
+      has_meta = has_meta || tables.text(0) == "meta";
+    }
+    bool versioned = false;
+    if (has_meta) {
+      Statement version(db_, path_, "SELECT COUNT(*) FROM meta WHERE key='schema_version'");
+      versioned = version.step() && version.integer(0) > 0;
+    }
+    if (!names.empty() && !versioned)
+      throw ArchiveError(path_ + ": not a demcal run archive: an SQLite database with tables " + names +
+                         " and no demcal schema version; name another file with --archive");
+  }
+  // Two processes may create the archive at once: the schema goes in one write transaction.
+  Transaction transaction(*this);
   exec(R"sql(
     CREATE TABLE IF NOT EXISTS meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
     CREATE TABLE IF NOT EXISTS runs(
@@ -207,30 +305,58 @@ RunArchive::RunArchive(const std::string& path) : path_(path) {
       position INTEGER NOT NULL, params_json TEXT NOT NULL, param_key TEXT NOT NULL,
       run_ids_json TEXT NOT NULL, fitness REAL,
       PRIMARY KEY(campaign_id, iteration, position));
-  )sql");
+)sql");
+  exec("INSERT OR IGNORE INTO meta(key, value) VALUES('schema_version', '" + std::to_string(kSchemaVersion) + "')");
+  transaction.commit();
   Statement version(db_, path_, "SELECT value FROM meta WHERE key='schema_version'");
-  if (version.step()) {
-    if (version.text(0) != std::to_string(kSchemaVersion))
-      throw ArchiveError(path + ": archive schema version " + version.text(0) + ", this demcal reads " +
-                         std::to_string(kSchemaVersion));
-  } else {
-    exec("INSERT INTO meta(key, value) VALUES('schema_version', '" + std::to_string(kSchemaVersion) + "')");
+  if (version.step() && version.text(0) != std::to_string(kSchemaVersion))
+    throw ArchiveError(path_ + ": archive schema version " + version.text(0) + ", this demcal reads " +
+                       std::to_string(kSchemaVersion));
+}
+
+RunArchive::Transaction::Transaction(RunArchive& archive) : archive_(archive) {
+  archive_.exec("BEGIN IMMEDIATE");
+  if (write_pause_ms() >= 0) {
+    static std::atomic<long> writes{0};
+    number_ = ++writes;
+    std::cerr << "demcal-archive: write " << number_ << " begins\n" << std::flush;
   }
+}
+
+void RunArchive::Transaction::commit() {
+  if (const int ms = write_pause_ms(); ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(ms));
+  archive_.exec("COMMIT");
+  committed_ = true;
+  if (number_ > 0) std::cerr << "demcal-archive: write " << number_ << " ends\n" << std::flush;
+}
+
+RunArchive::Transaction::~Transaction() {
+  if (!committed_) sqlite3_exec(archive_.db_, "ROLLBACK", nullptr, nullptr, nullptr);
 }
 
 RunArchive::~RunArchive() { sqlite3_close(db_); }
 
 void RunArchive::exec(const std::string& sql) const {
   char* error = nullptr;
-  if (sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &error) != SQLITE_OK) {
-    const std::string why = error ? error : "unknown error";
+  const int rc = with_busy_retry([&] {
     sqlite3_free(error);
-    throw ArchiveError(path_ + ": SQLite failed (" + why + ") in: " + sql.substr(0, 120));
+    error = nullptr;
+    return sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &error);
+  });
+  if (rc != SQLITE_OK) {
+    const std::string why = error ? error : sqlite3_errstr(rc);
+    sqlite3_free(error);
+    throw ArchiveError(path_ + ": SQLite failed (" + why + ")" +
+                       (is_busy(rc) ? " after waiting " + std::to_string(kMaxBusyWait.count()) +
+                                          " s for another process to release the archive"
+                                    : std::string()) +
+                       " in: " + sql.substr(0, 120));
   }
 }
 
 std::int64_t RunArchive::insert_run(const RunRecord& run) {
   const std::string key = parameter_key(run.params);
+  Transaction transaction(*this);
   {
     Statement insert(db_, path_,
                      "INSERT OR IGNORE INTO runs(model_hash, param_key, params_json, code_version, backend,"
@@ -260,7 +386,9 @@ std::int64_t RunArchive::insert_run(const RunRecord& run) {
   select.bind(1, run.model_hash);
   select.bind(2, key);
   if (!select.step()) throw ArchiveError(path_ + ": run just inserted is missing");
-  return select.integer(0);
+  const std::int64_t id = select.integer(0);
+  transaction.commit();
+  return id;
 }
 
 namespace {
@@ -308,7 +436,38 @@ std::int64_t RunArchive::run_count() const {
   return s.integer(0);
 }
 
+std::string RunArchive::integrity_check() const {
+  Statement s(db_, path_, "PRAGMA integrity_check");
+  std::string out;
+  while (s.step()) out += (out.empty() ? "" : "\n") + s.text(0);
+  return out;
+}
+
+std::vector<RunRecord> RunArchive::runs_with_status(const std::string& status) const {
+  Statement s(db_, path_,
+              "SELECT id, model_hash, param_key, code_version, backend, status, message, wall_time_s,"
+              " details_json, created_at FROM runs WHERE status=? ORDER BY id");
+  s.bind(1, status);
+  std::vector<RunRecord> out;
+  while (s.step()) {
+    RunRecord run;
+    run.id = s.integer(0);
+    run.model_hash = s.text(1);
+    run.params = params_from_key(s.text(2));
+    run.code_version = s.text(3);
+    run.backend = s.text(4);
+    run.status = s.text(5);
+    run.message = s.text(6);
+    run.wall_time_s = s.real(7);
+    run.details = nlohmann::json::parse(s.text(8));
+    run.created_at = s.text(9);
+    out.push_back(std::move(run));
+  }
+  return out;
+}
+
 void RunArchive::put_fitness(const FitnessRecord& f) {
+  Transaction transaction(*this);
   Statement s(db_, path_,
               "INSERT OR REPLACE INTO fitness(run_id, objective_key, objective, objective1, objective2,"
               " fitness, channels_json, wall_time_s) VALUES(?,?,?,?,?,?,?,?)");
@@ -321,6 +480,7 @@ void RunArchive::put_fitness(const FitnessRecord& f) {
   s.bind(7, f.channels.dump());
   s.bind(8, f.wall_time_s);
   s.step();
+  transaction.commit();
 }
 
 std::optional<FitnessRecord> RunArchive::find_fitness(std::int64_t run_id, const std::string& objective_key) const {
@@ -343,6 +503,7 @@ std::optional<FitnessRecord> RunArchive::find_fitness(std::int64_t run_id, const
 }
 
 std::int64_t RunArchive::create_campaign(const CampaignRecord& c) {
+  Transaction transaction(*this);
   Statement s(db_, path_,
               "INSERT INTO campaigns(name, config_key, config_json, code_version, created_at) VALUES(?,?,?,?,?)");
   s.bind(1, c.name);
@@ -351,7 +512,9 @@ std::int64_t RunArchive::create_campaign(const CampaignRecord& c) {
   s.bind(4, c.code_version);
   s.bind(5, c.created_at.empty() ? utc_now() : c.created_at);
   s.step();
-  return sqlite3_last_insert_rowid(db_);
+  const std::int64_t id = sqlite3_last_insert_rowid(db_);
+  transaction.commit();
+  return id;
 }
 
 std::optional<CampaignRecord> RunArchive::latest_campaign(const std::string& config_key) const {
@@ -371,8 +534,8 @@ std::optional<CampaignRecord> RunArchive::latest_campaign(const std::string& con
 }
 
 void RunArchive::commit_iteration(const IterationRecord& it, const std::vector<EvaluationRecord>& evaluations) {
-  exec("BEGIN IMMEDIATE");
-  try {
+  Transaction transaction(*this);
+  {
     for (const auto& e : evaluations) {
       Statement s(db_, path_,
                   "INSERT OR REPLACE INTO evaluations(campaign_id, iteration, position, params_json, param_key,"
@@ -397,11 +560,8 @@ void RunArchive::commit_iteration(const IterationRecord& it, const std::vector<E
     s.bind(6, it.wall_time_s);
     s.bind(7, it.created_at.empty() ? utc_now() : it.created_at);
     s.step();
-    exec("COMMIT");
-  } catch (...) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    throw;
   }
+  transaction.commit();
 }
 
 namespace {

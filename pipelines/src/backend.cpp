@@ -5,6 +5,10 @@
 #include "demcal/pipelines/process.hpp"
 
 #include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <csignal>
+#include <cstdlib>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -171,6 +175,9 @@ void CommandBackendOptions::Validate() const {
     throw std::invalid_argument("command template must contain {output} (the CSV the program writes): " + command);
   if (!(timeout_s >= 0)) throw std::invalid_argument("command timeout must be >= 0 s, got " + std::to_string(timeout_s));
   if (work_root.empty()) throw std::invalid_argument("command backend: empty work_root");
+  if (max_output_bytes <= 0)
+    throw std::invalid_argument("command backend: max_output_bytes must be > 0, got " +
+                                std::to_string(max_output_bytes));
   if (case_names.empty()) throw std::invalid_argument("command backend: no cases");
 }
 
@@ -194,16 +201,67 @@ std::string CommandBackend::model_hash(std::size_t case_index) const {
 }
 
 namespace {
+// The last max_chars characters of a file (reads no more than that), newlines shown as '|'.
 std::string tail_of_file(const std::string& path, std::size_t max_chars) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  std::string text = buffer.str();
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) return {};
+  const std::streamoff size = in.tellg();
+  const std::streamoff from = size > static_cast<std::streamoff>(max_chars) ? size - static_cast<std::streamoff>(max_chars) : 0;
+  in.seekg(from);
+  std::string text(static_cast<size_t>(size - from), '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<size_t>(in.gcount()));
   while (!text.empty() && (text.back() == '\n' || text.back() == '\r' || text.back() == ' ')) text.pop_back();
-  if (text.size() > max_chars) text = "..." + text.substr(text.size() - max_chars);
+  if (from > 0) text = "..." + text;
   for (auto& c : text)
     if (c == '\n') c = '|';
   return text;
+}
+
+std::string format_bytes(long long bytes) {
+  char buffer[64];
+  if (bytes >= (1ll << 20))
+    std::snprintf(buffer, sizeof buffer, "%lld bytes (%.1f MiB)", bytes, static_cast<double>(bytes) / (1 << 20));
+  else
+    std::snprintf(buffer, sizeof buffer, "%lld bytes", bytes);
+  return buffer;
+}
+
+bool non_finite_cell(std::string cell) {
+  while (!cell.empty() && (cell.back() == ' ' || cell.back() == '\r' || cell.back() == '"')) cell.pop_back();
+  size_t start = 0;
+  while (start < cell.size() && (cell[start] == ' ' || cell[start] == '"')) ++start;
+  cell = cell.substr(start);
+  if (cell.empty()) return true;
+  char* end = nullptr;
+  const double value = std::strtod(cell.c_str(), &end);
+  if (end == cell.c_str()) {
+    for (auto& c : cell) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return cell == "na" || cell == "n/a";
+  }
+  return *end == '\0' && !std::isfinite(value);
+}
+
+// The first data line of `path` whose cell in column `column` (0-based, of `columns`) is NaN,
+// empty or infinite: "line 12, column 'force': non-finite value 'nan'". Falls back to the row.
+std::string locate_non_finite(const std::string& path, size_t column, size_t columns, const std::string& name,
+                              size_t row, double value) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  for (size_t number = 1; std::getline(in, line); ++number) {
+    std::vector<std::string> cells(1);
+    for (char c : line) {
+      if (c == ',' || c == ';' || c == '\t') cells.emplace_back();
+      else cells.back() += c;
+    }
+    if (cells.size() != columns || !non_finite_cell(cells[column])) continue;
+    std::string cell = cells[column];
+    while (!cell.empty() && cell.back() == '\r') cell.pop_back();
+    return "line " + std::to_string(number) + ", column '" + name + "': non-finite value '" + cell + "'";
+  }
+  char buffer[48];
+  std::snprintf(buffer, sizeof buffer, "%g", value);
+  return "data row " + std::to_string(row + 1) + ", column '" + name + "': non-finite value '" + buffer + "'";
 }
 }  // namespace
 
@@ -242,27 +300,48 @@ SimulationOutcome CommandBackend::run_one(const SimulationTask& task) const {
   process.timeout_s = options_.timeout_s;
   process.stdout_path = (workdir / "stdout.txt").string();
   process.stderr_path = (workdir / "stderr.txt").string();
+  process.max_file_bytes = options_.max_output_bytes;
   const ProcessResult result = run_process(process);
   out.wall_time_s = result.wall_time_s;
-  out.details = {{"command", process.argv}, {"workdir", workdir.string()}, {"process_status", to_string(result.status)}};
-  if (!result.ok()) {
-    out.message = "external command " + result.message;
+  out.details = {{"command", process.argv}, {"workdir", workdir.string()}, {"process_status", to_string(result.status)},
+                 {"leftover_processes", result.leftover_processes}};
+  auto fail = [&](const std::string& why) {
+    out.status = "failed";
+    out.curves = {};
+    out.message = why;
     const std::string err = tail_of_file(process.stderr_path, 300);
     if (!err.empty()) out.message += "; stderr: " + err;
     return out;
+  };
+  if (!result.ok()) {
+    std::string why = "external command " + result.message;
+    if (result.status == ProcessStatus::signalled && result.signal == SIGXFSZ)
+      why += ": a file it wrote reached the limit of " + format_bytes(options_.max_output_bytes) +
+             " (backend.max_output_mb)";
+    return fail(why);
   }
-  if (!fs::exists(output)) {
-    out.message = "external command exited 0 but wrote no output file " + output;
-    return out;
-  }
+  if (!fs::exists(output)) return fail("external command exited 0 but wrote no output file " + output);
+  const auto size = static_cast<long long>(fs::file_size(output, ec));
+  if (ec) return fail("external command output " + output + ": cannot read its size: " + ec.message());
+  if (size == 0) return fail("external command exited 0 but its output file " + output + " is empty");
+  if (size >= options_.max_output_bytes)
+    return fail("external command output " + output + " is " + format_bytes(size) + ", at or over the limit of " +
+                format_bytes(options_.max_output_bytes) + " (backend.max_output_mb); not read");
   try {
     out.curves = smoothing::read_curve(output);
     out.curves.column("force");  // throws naming the columns when it is missing
   } catch (const std::exception& e) {
-    out.curves = {};
-    out.message = std::string("external command output unreadable: ") + e.what();
-    return out;
+    return fail(std::string("external command output unreadable: ") + e.what());
   }
+  const auto& columns = out.curves.columns;
+  for (size_t c = 0; c < columns.size(); ++c)
+    for (size_t r = 0; r < columns[c].values.size(); ++r)
+      if (!std::isfinite(columns[c].values[r]))
+        return fail("external command output " + output + ": " +
+                    locate_non_finite(output, c, columns.size(), columns[c].name, r, columns[c].values[r]));
+  if (result.leftover_processes > 0)
+    out.message = "the program left " + std::to_string(result.leftover_processes) +
+                  " process(es) running after it exited; killed";
   out.status = "completed";
   return out;
 }

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <memory>
 #include <condition_variable>
 #include <deque>
@@ -105,6 +106,7 @@ std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, co
     o.command = config.backend.command;
     o.timeout_s = config.backend.timeout_s;
     o.parallel = config.backend.parallel;
+    o.max_output_bytes = static_cast<long long>(config.backend.max_output_mb * 1024 * 1024);
     o.work_root = (fs::path(config.output) / "runs").string();
     for (const auto& c : config.cases) {
       o.case_names.push_back(c.name);
@@ -362,6 +364,10 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
       }
     }
   }
+  if (options.resume && options.note_fresh_resume && campaign_id == 0)
+    std::cerr << "demcal: note: --resume: " << archive.path() << " holds no campaign with this configuration (key "
+              << config_key << ": scene, measurement, parameters, objective or optimiser differ from every "
+              << "archived one); starting a new campaign\n";
   if (campaign_id == 0) {
     CampaignRecord record;
     record.name = config.name;
@@ -570,6 +576,24 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
         } catch (const std::exception&) {
           inputs.smoothed_best.emplace_back();
         }
+      }
+    }
+    for (const auto& e : evaluations) {
+      if (std::isfinite(e.fitness)) continue;
+      for (size_t k = 0; k < cases && k < e.run_ids.size(); ++k) {
+        const auto run = archive.run(e.run_ids[k]);
+        if (!run) continue;
+        std::string reason = run->message;
+        if (usable_status(run->status)) {
+          const auto f = archive.find_fitness(run->id, prepared.objective_keys[k]);
+          if (f && std::isfinite(f->fitness)) continue;  // another case failed this candidate
+          if (f && f->channels.contains("error")) {
+            const json& error = f->channels.at("error");
+            reason = "fitness: " + (error.is_string() ? error.get<std::string>() : error.dump());
+          }
+          if (reason.empty()) reason = "no finite fitness";
+        }
+        inputs.failures.push_back({e.iteration, e.position, config.cases[k].name, e.params, run->status, reason});
       }
     }
     write_report(inputs, config.output);

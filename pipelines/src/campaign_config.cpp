@@ -4,6 +4,8 @@
 #include "demcal/dem/generators.hpp"
 
 #include <cmath>
+#include <cstdio>
+#include <type_traits>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -21,6 +23,22 @@ std::string describe(const json& value) {
   return text.size() > 60 ? text.substr(0, 60) + "..." : text;
 }
 
+std::string number_text(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%g", value);
+  return buffer;
+}
+
+// What a field of type T holds, for messages.
+template <class T>
+const char* expected_kind() {
+  if constexpr (std::is_same_v<T, bool>) return "true or false";
+  else if constexpr (std::is_integral_v<T>) return "an integer";
+  else if constexpr (std::is_floating_point_v<T>) return "a number";
+  else if constexpr (std::is_same_v<T, std::string>) return "a string";
+  else return "a value of another type";
+}
+
 // Reads j[key] into out if present, with a message naming where/key and the value on a type error.
 template <class T>
 void read_field(const json& j, const char* key, T& out, const std::string& where) {
@@ -28,7 +46,7 @@ void read_field(const json& j, const char* key, T& out, const std::string& where
   try {
     out = j.at(key).get<T>();
   } catch (const std::exception&) {
-    throw CampaignError(where + "." + key + ": wrong type for value " + describe(j.at(key)));
+    throw CampaignError(where + "." + key + ": expected " + expected_kind<T>() + ", got " + describe(j.at(key)));
   }
   if constexpr (std::is_floating_point_v<T>) {
     if (!std::isfinite(out)) throw CampaignError(where + "." + key + ": value must be finite, got " + describe(j.at(key)));
@@ -279,6 +297,9 @@ double unit_factor(const std::string& unit, const std::string& where) {
 }
 
 void CampaignConfig::Validate() const {
+  // The backend first: whether a case needs a scene depends on it.
+  if (backend.type != "threads" && backend.type != "command" && backend.type != "mpi")
+    throw CampaignError(source + ": backend.type: unknown backend '" + backend.type + "' (known: threads, command, mpi)");
   if (cases.empty()) throw CampaignError(source + ": no case (give 'scene' and 'measured', or 'cases')");
   std::set<std::string> names;
   for (size_t i = 0; i < cases.size(); ++i) {
@@ -308,12 +329,13 @@ void CampaignConfig::Validate() const {
   } catch (const std::exception& e) {
     throw CampaignError(source + ": " + e.what());
   }
-  if (backend.type != "threads" && backend.type != "command" && backend.type != "mpi")
-    throw CampaignError(source + ": backend.type: unknown backend '" + backend.type + "' (known: threads, command, mpi)");
   if (backend.type == "command" && backend.command.empty())
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))
-    throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + std::to_string(backend.timeout_s));
+    throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + number_text(backend.timeout_s));
+  if (!(backend.max_output_mb > 0) || !(backend.max_output_mb <= 1048576))
+    throw CampaignError(source + ": backend.max_output_mb: must be > 0 and <= 1048576 (1 TiB), got " +
+                        number_text(backend.max_output_mb));
   if (polish.enabled) {
     try {
       polish.options.Validate();
@@ -351,7 +373,7 @@ json CampaignConfig::to_json() const {
   j["name"] = name;
   j["backend"] = {{"type", backend.type}, {"threads", backend.threads}, {"command", backend.command},
                   {"timeout_s", backend.timeout_s}, {"parallel", backend.parallel},
-                  {"fitness_threads", backend.fitness_threads}};
+                  {"fitness_threads", backend.fitness_threads}, {"max_output_mb", backend.max_output_mb}};
   j["identifiability"] = {{"relative_band", identifiability_band}};
   j["output"] = output;
   j["report"] = report;
@@ -423,7 +445,9 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
     if (b.is_string()) {
       c.backend.type = b.get<std::string>();
     } else {
-      reject_unknown_keys(b, {"type", "threads", "command", "timeout_s", "parallel", "fitness_threads"}, where);
+      reject_unknown_keys(b, {"type", "threads", "command", "timeout_s", "parallel", "fitness_threads", "max_output_mb"},
+                          where);
+      read_field(b, "max_output_mb", c.backend.max_output_mb, where);
       read_field(b, "fitness_threads", c.backend.fitness_threads, where);
       read_field(b, "type", c.backend.type, where);
       read_field(b, "threads", c.backend.threads, where);

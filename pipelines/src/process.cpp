@@ -1,15 +1,22 @@
 #include "demcal/pipelines/process.hpp"
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <poll.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
+#ifdef __linux__
+#include <sys/prctl.h>
+#endif
 
 #include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <stdexcept>
-#include <thread>
 
 namespace demcal::pipelines {
 
@@ -18,6 +25,8 @@ void ProcessOptions::Validate() const {
     throw std::invalid_argument("process: empty command (no program to run)");
   if (!(timeout_s >= 0))
     throw std::invalid_argument("process: timeout_s must be >= 0, got " + std::to_string(timeout_s));
+  if (max_file_bytes < 0)
+    throw std::invalid_argument("process: max_file_bytes must be >= 0, got " + std::to_string(max_file_bytes));
 }
 
 std::string to_string(ProcessStatus status) {
@@ -38,9 +47,281 @@ int open_output(const std::string& path) {
   return ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
 }
 
-void kill_group(pid_t pid) {
-  ::kill(-pid, SIGKILL);
-  ::kill(pid, SIGKILL);
+// ---- the supervisor (runs between fork and _exit: async-signal-safe calls only) ----------------
+
+// Messages from the supervisor to the caller: fixed-size records (atomic pipe writes).
+enum SupervisorMessage : int {
+  kStarted = 1,     // value: the program's pid (= its process group)
+  kExecFailed = 2,  // value: errno of chdir/exec
+  kExited = 3,      // value: the program's wait status
+  kKilled = 4,      // the caller asked (timeout, cancel) or went away; the program was killed
+  kLeftovers = 5,   // value: descendants still running after the program ended (killed)
+};
+struct Message {
+  int kind;
+  int value;
+};
+
+void send(int fd, int kind, int value) {
+  const Message m{kind, value};
+  ssize_t ignored = ::write(fd, &m, sizeof m);
+  (void)ignored;
+}
+
+void sleep_ms(long ms) {
+  timespec t{ms / 1000, (ms % 1000) * 1000000L};
+  ::nanosleep(&t, nullptr);
+}
+
+// Appends the decimal digits of value to buffer at *at.
+void append_number(char* buffer, int* at, long value) {
+  char digits[24];
+  int n = 0;
+  do digits[n++] = static_cast<char>('0' + value % 10);
+  while ((value /= 10) > 0);
+  while (n > 0) buffer[(*at)++] = digits[--n];
+}
+
+// SIGKILLs every child of this process (the supervisor) listed in /proc/PID/task/PID/children
+// (a single-threaded process: its one task lists them all); -1 when the kernel lacks that file.
+int kill_listed_children(pid_t self) {
+  char path[96] = "/proc/";
+  int at = 6;
+  append_number(path, &at, self);
+  for (const char* c = "/task/"; *c; ++c) path[at++] = *c;
+  append_number(path, &at, self);
+  for (const char* c = "/children"; *c; ++c) path[at++] = *c;
+  path[at] = '\0';
+  const int fd = ::open(path, O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return -1;
+  int killed = 0;
+  long pid = 0;
+  char buffer[1024];
+  for (ssize_t got; (got = ::read(fd, buffer, sizeof buffer)) > 0;)
+    for (ssize_t i = 0; i < got; ++i) {
+      if (buffer[i] >= '0' && buffer[i] <= '9') {
+        pid = pid * 10 + (buffer[i] - '0');
+      } else {
+        if (pid > 0 && ::kill(static_cast<pid_t>(pid), SIGKILL) == 0) ++killed;
+        pid = 0;
+      }
+    }
+  if (pid > 0 && ::kill(static_cast<pid_t>(pid), SIGKILL) == 0) ++killed;
+  ::close(fd);
+  return killed;
+}
+
+// SIGKILLs every process whose parent is this one (the supervisor); returns how many. Reads the
+// kernel's list of children where it has one, else scans /proc/*/stat for the parent pid.
+int kill_own_children(pid_t self) {
+  if (const int killed = kill_listed_children(self); killed >= 0) return killed;
+  const int dir = ::open("/proc", O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir < 0) return 0;
+  int killed = 0;
+  alignas(8) char buffer[8192];
+  for (;;) {
+    const long got = ::syscall(SYS_getdents64, dir, buffer, sizeof buffer);
+    if (got <= 0) break;
+    for (long offset = 0; offset < got;) {
+      const auto* entry = reinterpret_cast<const dirent64*>(buffer + offset);
+      offset += entry->d_reclen;
+      pid_t pid = 0;
+      const char* name = entry->d_name;
+      if (*name < '1' || *name > '9') continue;
+      for (; *name >= '0' && *name <= '9'; ++name) pid = pid * 10 + (*name - '0');
+      if (*name != '\0' || pid == self) continue;
+      // /proc/<pid>/stat: "pid (comm) state ppid ..."; comm may hold spaces and parentheses.
+      char path[40] = "/proc/";
+      char digits[16];
+      int n = 0;
+      for (pid_t v = pid; v > 0; v /= 10) digits[n++] = static_cast<char>('0' + v % 10);
+      int p = 6;
+      while (n > 0) path[p++] = digits[--n];
+      const char tail[] = "/stat";
+      for (char c : tail) path[p++] = c;
+      const int fd = ::open(path, O_RDONLY | O_CLOEXEC);
+      if (fd < 0) continue;
+      char stat[512];
+      const ssize_t len = ::read(fd, stat, sizeof stat - 1);
+      ::close(fd);
+      if (len <= 0) continue;
+      stat[len] = '\0';
+      const char* close_paren = nullptr;
+      for (const char* c = stat; *c; ++c)
+        if (*c == ')') close_paren = c;
+      if (!close_paren || close_paren[1] != ' ' || close_paren[2] == '\0' || close_paren[3] != ' ') continue;
+      pid_t ppid = 0;
+      for (const char* c = close_paren + 4; *c >= '0' && *c <= '9'; ++c) ppid = ppid * 10 + (*c - '0');
+      if (ppid == self && ::kill(pid, SIGKILL) == 0) ++killed;
+    }
+  }
+  ::close(dir);
+  return killed;
+}
+
+// Kills the program's group and every descendant re-parented here, reaping them, until the
+// supervisor has no child left (or 30 s pass: a process stuck in the kernel). Returns the number
+// of processes that were still running when the sweep began, besides the program itself.
+int kill_everything(pid_t program, pid_t self, bool program_reaped, int* program_status) {
+  int leftovers = 0;
+  bool counted = false;
+  for (int round = 0; round < 30000; ++round) {
+    ::kill(-program, SIGKILL);
+    const int killed = kill_own_children(self);
+    if (!counted) {
+      leftovers = killed - (program_reaped ? 0 : 1);
+      counted = true;
+    }
+    bool any = false;
+    for (;;) {
+      int status = 0;
+      const pid_t done = ::waitpid(-1, &status, WNOHANG);
+      if (done > 0) {
+        any = true;
+        if (done == program && !program_reaped) {
+          program_reaped = true;
+          *program_status = status;
+        }
+        continue;
+      }
+      if (done < 0 && errno == ECHILD) return leftovers < 0 ? 0 : leftovers;
+      break;
+    }
+    if (!any) sleep_ms(1);
+  }
+  return leftovers < 0 ? 0 : leftovers;
+}
+
+struct ChildSetup {
+  char* const* argv;
+  const char* workdir;
+  int out_fd, err_fd, lifeline, report;
+  long long max_file_bytes;
+};
+
+[[noreturn]] void supervise(const ChildSetup& setup) {
+  ::setpgid(0, 0);
+  struct sigaction ignore {};
+  ignore.sa_handler = SIG_IGN;
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE}) ::sigaction(sig, &ignore, nullptr);
+  // SIGCHLD is blocked except inside ppoll(), so the end of a child wakes the wait at once and
+  // never slips in between a check and the wait.
+  struct sigaction wake {};
+  wake.sa_handler = [](int) {};
+  ::sigaction(SIGCHLD, &wake, nullptr);
+  sigset_t none, only_child;
+  sigemptyset(&none);
+  sigemptyset(&only_child);
+  sigaddset(&only_child, SIGCHLD);
+  ::sigprocmask(SIG_SETMASK, &only_child, nullptr);
+#ifdef __linux__
+  ::prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0);
+#endif
+  // Keep only what is needed at fixed numbers 3..6, close every other descriptor inherited from
+  // the caller (another run's lifeline among them: its supervisor must see the caller go away).
+  const int keep[4] = {setup.out_fd, setup.err_fd, setup.lifeline, setup.report};
+  int moved[4];
+  for (int i = 0; i < 4; ++i) moved[i] = ::fcntl(keep[i], F_DUPFD_CLOEXEC, 64);
+  for (int i = 0; i < 4; ++i) {
+    ::dup2(moved[i], 3 + i);
+    ::fcntl(3 + i, F_SETFD, FD_CLOEXEC);
+  }
+#ifdef SYS_close_range
+  if (::syscall(SYS_close_range, 7u, ~0u, 0u) != 0)
+#endif
+    for (int fd = 7; fd < 4096; ++fd) ::close(fd);
+  const int out_fd = 3, err_fd = 4, lifeline = 5, report = 6;
+
+  int exec_pipe[2];
+  if (::pipe2(exec_pipe, O_CLOEXEC) != 0) {
+    send(report, kExecFailed, errno);
+    ::_exit(0);
+  }
+  const pid_t program = ::fork();
+  if (program < 0) {
+    send(report, kExecFailed, errno);
+    ::_exit(0);
+  }
+  if (program == 0) {
+    ::setpgid(0, 0);
+    struct sigaction dfl {};
+    dfl.sa_handler = SIG_DFL;
+    for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE, SIGXFSZ, SIGCHLD}) ::sigaction(sig, &dfl, nullptr);
+    ::sigprocmask(SIG_SETMASK, &none, nullptr);
+    const int null_in = ::open("/dev/null", O_RDONLY);
+    if (null_in >= 0) ::dup2(null_in, 0);
+    ::dup2(out_fd, 1);
+    ::dup2(err_fd, 2);
+    if (setup.max_file_bytes > 0) {
+      const rlimit limit{static_cast<rlim_t>(setup.max_file_bytes), static_cast<rlim_t>(setup.max_file_bytes)};
+      ::setrlimit(RLIMIT_FSIZE, &limit);
+    }
+    int error = 0;
+    if (setup.workdir && ::chdir(setup.workdir) != 0) {
+      error = errno;
+    } else {
+      ::execvp(setup.argv[0], setup.argv);
+      error = errno;
+    }
+    ssize_t ignored = ::write(exec_pipe[1], &error, sizeof error);
+    (void)ignored;
+    ::_exit(127);
+  }
+  ::setpgid(program, program);  // also from here, so a kill never races the program's own setpgid
+  ::close(exec_pipe[1]);
+  ::close(out_fd);
+  ::close(err_fd);
+  int exec_errno = 0;
+  ssize_t got;
+  do got = ::read(exec_pipe[0], &exec_errno, sizeof exec_errno);
+  while (got < 0 && errno == EINTR);
+  ::close(exec_pipe[0]);
+  if (got == static_cast<ssize_t>(sizeof exec_errno)) {
+    int ignored = 0;
+    kill_everything(program, ::getpid(), false, &ignored);
+    send(report, kExecFailed, exec_errno);
+    ::_exit(0);
+  }
+  send(report, kStarted, program);
+
+  const pid_t self = ::getpid();
+  for (;;) {
+    // Reap as we go: the program, and orphans that end on their own (no zombies pile up).
+    for (;;) {
+      int status = 0;
+      const pid_t done = ::waitpid(-1, &status, WNOHANG);
+      if (done == program) {
+        const int leftovers = kill_everything(program, self, true, &status);
+        if (leftovers > 0) send(report, kLeftovers, leftovers);
+        send(report, kExited, status);
+        ::_exit(0);
+      }
+      if (done <= 0) break;
+    }
+    pollfd watch{lifeline, POLLIN, 0};
+    const timespec second{1, 0};
+    if (::ppoll(&watch, 1, &second, &none) > 0) {
+      // A byte or end of file: the caller wants the run stopped, or is gone.
+      int status = 0;
+      kill_everything(program, self, false, &status);
+      send(report, kKilled, 0);
+      ::_exit(0);
+    }
+  }
+}
+
+bool read_message(int fd, Message* m) {
+  char* p = reinterpret_cast<char*>(m);
+  size_t have = 0;
+  while (have < sizeof *m) {
+    const ssize_t got = ::read(fd, p + have, sizeof *m - have);
+    if (got > 0) {
+      have += static_cast<size_t>(got);
+    } else if (got == 0 || errno != EINTR) {
+      return false;
+    }
+  }
+  return true;
 }
 
 }  // namespace
@@ -53,7 +334,7 @@ ProcessResult run_process(const ProcessOptions& options) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
 
-  // Everything the child needs is prepared before fork: after it, only async-signal-safe calls.
+  // Everything the supervisor needs is prepared before fork: after it, only async-signal-safe calls.
   std::vector<char*> argv;
   for (const auto& word : options.argv) argv.push_back(const_cast<char*>(word.c_str()));
   argv.push_back(nullptr);
@@ -66,88 +347,94 @@ ProcessResult run_process(const ProcessOptions& options) {
     result.message = "cannot open " + bad + " for writing: " + std::strerror(errno);
     return result;
   }
-  // A pipe with close-on-exec tells the parent whether exec succeeded (it carries errno if not).
-  int status_pipe[2];
-  if (::pipe2(status_pipe, O_CLOEXEC) != 0) {
+  // lifeline: only this process holds its write end; closing it (or dying) stops the run.
+  // report: the supervisor's messages.
+  int lifeline[2], report[2];
+  if (::pipe2(lifeline, O_CLOEXEC) != 0) {
     ::close(out_fd);
     ::close(err_fd);
     result.message = std::string("pipe: ") + std::strerror(errno);
     return result;
   }
+  if (::pipe2(report, O_CLOEXEC) != 0) {
+    for (int fd : {out_fd, err_fd, lifeline[0], lifeline[1]}) ::close(fd);
+    result.message = std::string("pipe: ") + std::strerror(errno);
+    return result;
+  }
   const char* workdir = options.working_directory.empty() ? nullptr : options.working_directory.c_str();
+  const ChildSetup setup{argv.data(), workdir, out_fd, err_fd, lifeline[0], report[1], options.max_file_bytes};
 
-  const pid_t pid = ::fork();
-  if (pid < 0) {
+  const pid_t supervisor = ::fork();
+  if (supervisor < 0) {
     result.message = std::string("fork: ") + std::strerror(errno);
-    ::close(out_fd);
-    ::close(err_fd);
-    ::close(status_pipe[0]);
-    ::close(status_pipe[1]);
+    for (int fd : {out_fd, err_fd, lifeline[0], lifeline[1], report[0], report[1]}) ::close(fd);
     return result;
   }
-  if (pid == 0) {
-    ::setpgid(0, 0);
-    const int null_in = ::open("/dev/null", O_RDONLY);
-    if (null_in >= 0) ::dup2(null_in, 0);
-    ::dup2(out_fd, 1);
-    ::dup2(err_fd, 2);
-    int error = 0;
-    if (workdir && ::chdir(workdir) != 0) {
-      error = errno;
-    } else {
-      ::execvp(argv[0], argv.data());
-      error = errno;
-    }
-    ssize_t ignored = ::write(status_pipe[1], &error, sizeof error);
-    (void)ignored;
-    ::_exit(127);
-  }
-  ::setpgid(pid, pid);  // also from the parent, so a kill never races the child's own setpgid
-  ::close(out_fd);
-  ::close(err_fd);
-  ::close(status_pipe[1]);
-  int child_errno = 0;
-  const ssize_t got = ::read(status_pipe[0], &child_errno, sizeof child_errno);
-  ::close(status_pipe[0]);
-  if (got == static_cast<ssize_t>(sizeof child_errno)) {
-    int ignored_status = 0;
-    ::waitpid(pid, &ignored_status, 0);
-    result.status = ProcessStatus::failed_to_start;
-    result.wall_time_s = elapsed();
-    result.message = "cannot run '" + options.argv[0] + "'" +
-                     (workdir ? " in " + options.working_directory : std::string()) + ": " +
-                     std::strerror(child_errno);
-    return result;
-  }
+  if (supervisor == 0) supervise(setup);
+  for (int fd : {out_fd, err_fd, lifeline[0], report[1]}) ::close(fd);
 
-  int wait_status = 0;
-  auto poll_interval = std::chrono::microseconds(200);
-  while (true) {
-    const pid_t done = ::waitpid(pid, &wait_status, WNOHANG);
-    if (done == pid) break;
-    if (done < 0 && errno != EINTR) {
-      result.message = std::string("waitpid: ") + std::strerror(errno);
-      kill_group(pid);
-      return result;
+  pid_t program = 0;
+  int leftovers = 0;
+  bool stop_requested = false, cancelled = false;
+  double stop_requested_at = 0;
+  Message m{0, 0};
+  bool final_message = false;
+  while (!final_message) {
+    if (!stop_requested) {
+      cancelled = options.cancel && options.cancel->load();
+      const bool timed_out = options.timeout_s > 0 && elapsed() >= options.timeout_s;
+      if (cancelled || timed_out) {
+        stop_requested = true;
+        stop_requested_at = elapsed();
+        ::close(lifeline[1]);
+        lifeline[1] = -1;
+      }
+    } else if (elapsed() - stop_requested_at > 30) {
+      break;  // the supervisor does not answer: killed below
     }
-    const bool cancelled = options.cancel && options.cancel->load();
-    const bool timed_out = options.timeout_s > 0 && elapsed() >= options.timeout_s;
-    if (cancelled || timed_out) {
-      kill_group(pid);
-      ::waitpid(pid, &wait_status, 0);
-      result.wall_time_s = elapsed();
-      result.status = cancelled ? ProcessStatus::cancelled : ProcessStatus::timed_out;
-      char buffer[96];
-      std::snprintf(buffer, sizeof buffer, "killed after the %g s timeout", options.timeout_s);
-      result.message = cancelled ? "killed: campaign cancelled" : buffer;
-      return result;
-    }
-    std::this_thread::sleep_for(poll_interval);
-    poll_interval = std::min(poll_interval * 2, std::chrono::microseconds(20000));
+    pollfd watch{report[0], POLLIN, 0};
+    const int ready = ::poll(&watch, 1, 10);
+    if (ready < 0 && errno != EINTR) break;
+    if (ready <= 0) continue;
+    if (!read_message(report[0], &m)) break;  // the supervisor died without a final word
+    if (m.kind == kStarted) program = m.value;
+    else if (m.kind == kLeftovers) leftovers = m.value;
+    else final_message = true;
+  }
+  if (lifeline[1] >= 0) ::close(lifeline[1]);
+  ::close(report[0]);
+  if (!final_message) {
+    // Last resort (the supervisor itself was killed or hangs): kill what can still be reached.
+    ::kill(supervisor, SIGKILL);
+    if (program > 0) ::kill(-program, SIGKILL);
+  }
+  int supervisor_status = 0;
+  while (::waitpid(supervisor, &supervisor_status, 0) < 0 && errno == EINTR) {
   }
   result.wall_time_s = elapsed();
-  // Whatever the program left running in its group goes with it.
-  ::kill(-pid, SIGKILL);
+  result.leftover_processes = leftovers;
+
+  if (!final_message) {
+    result.status = ProcessStatus::signalled;
+    result.signal = WIFSIGNALED(supervisor_status) ? WTERMSIG(supervisor_status) : 0;
+    result.message = "the process supervisor ended unexpectedly";
+    return result;
+  }
+  if (m.kind == kExecFailed) {
+    result.status = ProcessStatus::failed_to_start;
+    result.message = "cannot run '" + options.argv[0] + "'" +
+                     (workdir ? " in " + options.working_directory : std::string()) + ": " +
+                     std::strerror(m.value);
+    return result;
+  }
+  if (m.kind == kKilled) {
+    result.status = cancelled ? ProcessStatus::cancelled : ProcessStatus::timed_out;
+    char buffer[96];
+    std::snprintf(buffer, sizeof buffer, "killed after the %g s timeout", options.timeout_s);
+    result.message = cancelled ? "killed: campaign cancelled" : buffer;
+    return result;
+  }
+  const int wait_status = m.value;
   if (WIFEXITED(wait_status)) {
     result.status = ProcessStatus::exited;
     result.exit_code = WEXITSTATUS(wait_status);

@@ -354,6 +354,24 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
          << d.value("sliding_joints", json::array()).dump() << ".\n\n";
     md << figure_markdown(failure_figure(in, k, out_dir));
   }
+  if (!in.failures.empty()) {
+    constexpr size_t kListed = 100;
+    md << "## Failed runs\n\n" << in.failures.size()
+       << " run(s) left their candidate without a finite fitness; the optimiser ranked those candidates worst "
+          "and went on.";
+    if (in.failures.size() > kListed) md << " The first " << kListed << " are listed.";
+    md << "\n\n| iteration | candidate | case | parameters | status | reason |\n| --- | --- | --- | --- | --- | --- |\n";
+    for (size_t i = 0; i < in.failures.size() && i < kListed; ++i) {
+      const auto& f = in.failures[i];
+      std::string params, reason = f.reason;
+      for (const auto& [name, value] : f.params) params += (params.empty() ? "" : ", ") + name + " " + fmt(value);
+      for (auto& c : reason)
+        if (c == '|' || c == '\n') c = '/';
+      md << "| " << f.iteration << " | " << f.position << " | " << f.case_name << " | " << params << " | " << f.status
+         << " | " << reason << " |\n";
+    }
+    md << "\n";
+  }
   const std::string path = (fs::path(out_dir) / "report.md").string();
   std::ofstream out(path);
   out << md.str();

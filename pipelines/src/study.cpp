@@ -362,6 +362,7 @@ StudyResult run_study(const StudyConfig& config, bool progress) {
       RunOptions options;
       options.progress = false;
       options.resume = config.resume;
+      options.note_fresh_resume = false;  // a study starts most of its campaigns fresh
       const CampaignResult campaign = run_campaign(c, options);
       StudyCampaign sc;
       sc.seed = seed;

@@ -1,8 +1,15 @@
 // The run archive: one SQLite file (WAL journal) holding every simulation a campaign asked for, the
 // fitness of each run against each measurement, and the optimiser's state after every iteration.
 //
-// Nothing is lost on a crash: each write is its own transaction, committed before the call returns,
-// so a process killed with SIGKILL keeps every run, fitness and iteration it had committed. Runs are
+// Nothing is lost on a crash: each write is its own short transaction (BEGIN IMMEDIATE ... COMMIT),
+// committed before the call returns, so a process killed with SIGKILL keeps every run, fitness and
+// iteration it had committed, and loses at most the one write in flight, whole.
+//
+// Several processes may write one archive at once (two campaigns, a study beside a campaign): the
+// WAL journal lets readers go on while one writes; a writer that finds the archive locked waits
+// (SQLite's busy handler, 10 s per attempt) and retries, for at most 120 s in all, before it gives
+// up with an ArchiveError saying so. A file that is not an SQLite database, or an SQLite database
+// of something else (tables but no demcal schema version), is refused, never modified. Runs are
 // keyed by (model hash, parameter key): a run whose model and parameters are already archived is
 // read back instead of simulated again, whichever campaign made it.
 //
@@ -111,7 +118,9 @@ struct EvaluationRecord {
 
 class RunArchive {
  public:
-  // Opens (creating if needed) the archive file and its tables; WAL journal, busy timeout 30 s.
+  // Opens (creating if needed) the archive file and its tables; WAL journal. Throws ArchiveError
+  // naming the file: cannot be opened or created, not an SQLite database, a foreign database, a
+  // schema version this demcal does not read.
   explicit RunArchive(const std::string& path);
   ~RunArchive();
   RunArchive(const RunArchive&) = delete;
@@ -126,6 +135,10 @@ class RunArchive {
                                     const std::map<std::string, double>& params) const;
   std::optional<RunRecord> run(std::int64_t id) const;
   std::int64_t run_count() const;
+  // SQLite's PRAGMA integrity_check: "ok", or the problems it lists (one per line).
+  std::string integrity_check() const;
+  // Every run with this status ("failed", "unstable", ...), in id order, without curves.
+  std::vector<RunRecord> runs_with_status(const std::string& status) const;
 
   // Fitness rows (one per run and objective key); put replaces.
   void put_fitness(const FitnessRecord& fitness);
@@ -144,6 +157,21 @@ class RunArchive {
   std::vector<EvaluationRecord> evaluations(std::int64_t campaign_id) const;
 
  private:
+  // One short write transaction (BEGIN IMMEDIATE ... COMMIT); rolled back unless committed.
+  class Transaction {
+   public:
+    explicit Transaction(RunArchive& archive);
+    ~Transaction();
+    Transaction(const Transaction&) = delete;
+    Transaction& operator=(const Transaction&) = delete;
+    void commit();
+
+   private:
+    RunArchive& archive_;
+    bool committed_ = false;
+    long number_ = 0;
+  };
+  void open_schema();
   void exec(const std::string& sql) const;
   std::string path_;
   sqlite3* db_ = nullptr;

@@ -88,9 +88,14 @@ class ThreadBackend : public EvaluationBackend {
 //                  gauge (m), optionally `time` — the convention of `demcal fitness`
 //   {workdir}      a fresh, empty folder for this run (the program also starts there)
 //   {case}         the case name;  {scene}  the case's scene file ("" when it has none)
-// A run fails (status "failed", message saying why, stderr's last lines included) when the
-// program cannot start, exits non-zero, dies of a signal, outlives timeout_s (its whole process
-// group is killed), or leaves no readable output.
+// A run fails (status "failed", fitness NaN, the message saying why, with stderr's last lines)
+// when the program cannot start, exits non-zero, dies of a signal, outlives timeout_s, writes a
+// file larger than max_output_bytes (stdout and stderr included: the kernel stops it with SIGXFSZ),
+// or leaves an output that is missing, empty, unreadable as a curve (the reader's message, naming
+// file, line and column), without a `force` column, with fewer than 2 rows, or with a NaN or
+// infinite value (named by file, line, column and value). Whatever the program leaves running is
+// killed and reaped when it ends (process.hpp); a run that completed but left processes behind
+// says so in its message.
 struct CommandBackendOptions {
   std::string command;            // the template, e.g. "python3 sim.py {kn} {friction_deg} {output}"
   double timeout_s = 0;           // s per run, 0 = none
@@ -99,8 +104,9 @@ struct CommandBackendOptions {
   std::vector<std::string> case_names;
   std::vector<std::string> scene_files;  // per case, may be ""
   std::vector<std::string> parameter_names;  // every name a task may carry (checks the template)
+  long long max_output_bytes = 64ll << 20;   // largest file a run may write, bytes (> 0)
   // Throws std::invalid_argument: empty or malformed template, an unknown placeholder, no {output},
-  // negative timeout, empty work_root.
+  // negative timeout, empty work_root, max_output_bytes <= 0.
   void Validate() const;
 };
 

@@ -86,6 +86,9 @@ struct BackendSpec {
   std::string command;                 // command backend: argument template (backend.hpp)
   double timeout_s = 0;                // command backend: s per run, 0 = none
   int parallel = 0;                    // command backend: programs at once, <= 0 = hardware threads
+  double max_output_mb = 64;           // command backend: largest file a run may write (output CSV,
+                                       // stdout, stderr), MiB, (0, 1048576]; a run that goes
+                                       // past it fails
   int fitness_threads = 0;             // threads computing objectives (objective 2 trains networks)
                                        // while simulations run; <= 0 = every hardware thread.
                                        // Does not change any result.
@@ -156,6 +159,7 @@ dem::Scene build_scene(const SceneSpec& spec, const std::string& where);
 
 struct RunOptions {
   bool resume = false;       // continue the newest campaign with the same key in the archive
+  bool note_fresh_resume = true;  // with resume: say on stderr when nothing matches (a new campaign)
   bool progress = true;      // progress lines on stderr
   int mpi_rank = 0;          // set by the CLI under mpirun
   int mpi_size = 1;

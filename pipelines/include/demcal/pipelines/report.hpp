@@ -4,7 +4,7 @@
 // simulations); the five best parameter sets in the layout of the paper's Tables 1-4; the evaluated
 // and the five best sets in parameter space (the paper's Figures 14, 17, 20, 23); the failure mode
 // of the best run (deformed blocks coloured by displacement magnitude, hinges and sliding joints
-// marked). A figure gnuplot cannot draw is replaced by a line saying why; the report is still
+// marked); the runs that failed and why (first 100). A figure gnuplot cannot draw is replaced by a line saying why; the report is still
 // written.
 #pragma once
 
@@ -25,6 +25,16 @@ struct ReportInputs {
   // Objective 2 only: smoothed measured and best simulated channels per case.
   std::vector<std::map<std::string, smoothing::XYSeries>> smoothed_measured;
   std::vector<std::map<std::string, smoothing::XYSeries>> smoothed_best;
+  // Candidates without a finite fitness, in evaluation order: listed under "Failed runs" with the
+  // reason archived for their run (a crash, a timeout, a bad output, no common window, ...).
+  struct Failure {
+    int iteration = 0, position = 0;
+    std::string case_name;
+    std::map<std::string, double> params;
+    std::string status;   // the run's status ("failed", "unstable", ... or "completed")
+    std::string reason;   // the run's message, or why its fitness is not finite
+  };
+  std::vector<Failure> failures;
 };
 
 // Writes report.md and figures/ under out_dir; returns the report's path. Throws std::runtime_error
