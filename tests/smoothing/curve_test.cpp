@@ -12,7 +12,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string shared_db() { return std::string(DEMCAL_SHARED_DIR) + "/data/stone-masonry-db"; }
+// The Lourenço 2005 curves (data/walls) and their envelopes (data/walls/envelopes), bundled in the repository.
+std::string walls_dir() { return std::string(DEMCAL_SOURCE_DIR) + "/data/walls"; }
 
 // Expects parse_curve to throw a CurveError whose message holds every fragment.
 void expect_error(const std::string& text, const std::vector<std::string>& fragments) {
@@ -28,8 +29,8 @@ void expect_error(const std::string& text, const std::vector<std::string>& fragm
 
 TEST(Curve, ReadsEveryBundledFile) {
   int files = 0;
-  for (const char* folder : {"curves", "envelopes"}) {
-    for (const auto& entry : fs::directory_iterator(shared_db() + "/" + folder)) {
+  for (const std::string& folder : {walls_dir(), walls_dir() + "/envelopes"}) {
+    for (const auto& entry : fs::directory_iterator(folder)) {
       if (entry.path().extension() != ".csv") continue;
       const Curve c = read_curve(entry.path().string());
       ASSERT_EQ(c.column_names(), (std::vector<std::string>{"top_displacement", "horizontal_force", "drift"}))
@@ -56,7 +57,7 @@ TEST(Curve, ReadsEveryBundledFile) {
 }
 
 TEST(Curve, KeepsRepeatedAndDecreasingAbscissae) {
-  const Curve c = read_curve(shared_db() + "/curves/FD_SW2501_Lourenco2005.csv");
+  const Curve c = read_curve(walls_dir() + "/FD_SW2501_Lourenco2005.csv");
   const auto& x = c.column("top_displacement").values;
   // Rows 2 and 3 of the data repeat 0.08 mm with different forces.
   EXPECT_EQ(x[1], 0.08);
@@ -64,7 +65,7 @@ TEST(Curve, KeepsRepeatedAndDecreasingAbscissae) {
   EXPECT_EQ(c.column("horizontal_force").values[1], 11.6);
   EXPECT_EQ(c.column("horizontal_force").values[2], 12.4);
   // SW.30.1 steps back once.
-  const Curve sw301 = read_curve(shared_db() + "/curves/FD_SW301_Lourenco2005.csv");
+  const Curve sw301 = read_curve(walls_dir() + "/FD_SW301_Lourenco2005.csv");
   const auto& y = sw301.column("top_displacement").values;
   int decreasing = 0;
   for (std::size_t i = 1; i < y.size(); ++i) decreasing += y[i] < y[i - 1];
