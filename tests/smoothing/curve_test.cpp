@@ -135,3 +135,48 @@ TEST(Curve, BadInputNamesFileLineAndColumn) {
     EXPECT_NE(std::string(e.what()).find("ok.csv: no column 'force' (columns: a, b)"), std::string::npos) << e.what();
   }
 }
+
+// Regression cases found by fuzzing the reader (fuzz/csv_fuzz.cpp): every curve the reader returns
+// is either written so that it reads back equal, or refused by the writer with a CurveError.
+TEST(Curve, WriterRoundTripsOrRefusesWhatTheReaderAccepts) {
+  const auto round_trips = [](const std::string& text) {
+    const Curve c = parse_curve(text, "in.csv");
+    const Curve back = parse_curve(format_curve(c), "back.csv");
+    EXPECT_EQ(back.column_names(), c.column_names());
+    EXPECT_EQ(back.preamble, c.preamble);
+    ASSERT_EQ(back.rows(), c.rows());
+    for (std::size_t j = 0; j < c.columns.size(); ++j) {
+      EXPECT_EQ(back.columns[j].unit, c.columns[j].unit);
+      for (std::size_t i = 0; i < c.rows(); ++i) {
+        const double a = c.columns[j].values[i], b = back.columns[j].values[i];
+        EXPECT_TRUE((std::isnan(a) && std::isnan(b)) || a == b) << i << " " << a << " " << b;
+      }
+    }
+  };
+  // One column (trailing separators in the file): written with a trailing comma so it reads back.
+  round_trips("\n$2\n3,,\n4\n");
+  round_trips("x;y\n[mm];[kN]\n0,5;1\n1,5;nan\n2,5;3\n");
+  // A name holding a parenthesised unit after the unit was split off ("e)(N)(N)" reads as name
+  // "e)(N)", unit N): written as it is, the name would lose "(N)" on reading. Refused.
+  EXPECT_THROW(format_curve(parse_curve("pream)\te)(N)(N)\n0\t0\n1\t25\n2\tnan\n", "u.csv")), CurveError);
+
+  // A tab-separated file whose preamble holds a comma-separated numeric line: written with commas,
+  // that line would become the first data row. The writer refuses, naming the line.
+  const Curve preamble_data = parse_curve("0,0,0\nd\tf\n0\t1\n2\t3\n", "p.csv");
+  ASSERT_EQ(preamble_data.preamble, std::vector<std::string>{"0,0,0"});
+  try {
+    format_curve(preamble_data);
+    FAIL() << "a data-like preamble line was written";
+  } catch (const CurveError& e) {
+    EXPECT_NE(std::string(e.what()).find("preamble line 1 '0,0,0'"), std::string::npos) << e.what();
+  }
+  // Names the reader would split or read as numbers are refused too.
+  for (const std::string name : {"e (N)", "12", "nan"}) {
+    Curve c;
+    c.columns = {{name, "", {1, 2}}, {"y", "", {3, 4}}};
+    EXPECT_THROW(format_curve(c), CurveError) << name;
+  }
+  Curve bad_unit;
+  bad_unit.columns = {{"x", "m,m", {1, 2}}, {"y", "", {3, 4}}};
+  EXPECT_THROW(format_curve(bad_unit), CurveError);
+}
