@@ -1,11 +1,13 @@
 # demcal: the two commands that do everything on a fresh Debian machine.
 #   make demo   install missing packages, build, run the main job on the bundled default data
 #   make test   the same set-up, then every test
+#   make test-sanitize   every test in a separate AddressSanitizer + UBSan build (build-sanitize/)
+#   make fuzz    build the libFuzzer targets with clang (build-fuzz/) and run each FUZZ_MINUTES
 BUILD ?= build
 JOBS ?= 2
 BUILD_TYPE ?= Release
 
-.PHONY: all deps configure build demo test bench soak clean
+.PHONY: all deps configure build demo test test-sanitize fuzz bench soak clean
 
 all: build
 
@@ -25,6 +27,26 @@ demo: build
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j$(JOBS) --timeout 600
+
+# Sanitized build: RelWithDebInfo for readable reports, no benchmarks. SANITIZE_TARGETS: the test
+# programs to build (default all); SANITIZE_TESTS: a ctest -R pattern, SANITIZE_EXCLUDE a ctest -E
+# pattern (docs/hardening.md gives the times). Tests of programs not built are skipped.
+# LeakSanitizer stays on.
+SANITIZE_BUILD ?= build-sanitize
+SANITIZE_TARGETS ?= all
+SANITIZE_TESTS ?= .
+SANITIZE_EXCLUDE ?= _NOT_BUILT
+test-sanitize: deps
+	cmake -S . -B $(SANITIZE_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDEMCAL_SANITIZE=ON -DDEMCAL_BUILD_BENCHMARKS=OFF
+	cmake --build $(SANITIZE_BUILD) -j$(JOBS) --target $(SANITIZE_TARGETS)
+	cd $(SANITIZE_BUILD) && ASAN_OPTIONS=abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	  ctest --output-on-failure -j$(JOBS) --timeout 3600 -R '$(SANITIZE_TESTS)' -E '_NOT_BUILT|$(SANITIZE_EXCLUDE)'
+
+# libFuzzer: clang build of the three fuzz targets, each run FUZZ_MINUTES (scripts/fuzz.sh).
+FUZZ_BUILD ?= build-fuzz
+FUZZ_MINUTES ?= 10
+fuzz: deps
+	bash scripts/fuzz.sh $(FUZZ_BUILD) $(FUZZ_MINUTES)
 
 bench: build
 	bash scripts/bench.sh $(BUILD)

@@ -61,7 +61,7 @@ BENCHMARK(BM_Objective2TenParticles)->Unit(benchmark::kMillisecond)->MinTime(2.0
 
 void BM_ReadLabCurve(benchmark::State& state) {
   const std::string path = std::string(DEMCAL_SOURCE_DIR) +
-                           "/../shared/data/stone-masonry-db/curves/FD_SW302_Lourenco2005.csv";
+                           "/data/walls/FD_SW302_Lourenco2005.csv";
   for (auto _ : state) benchmark::DoNotOptimize(read_curve(path));
 }
 BENCHMARK(BM_ReadLabCurve)->Unit(benchmark::kMicrosecond);

@@ -7,6 +7,9 @@ packages=(
   libeigen3-dev libtorch-dev libnlopt-cxx-dev nlohmann-json3-dev libcli11-dev
   libsqlite3-dev libgtest-dev libbenchmark-dev
   libopenmpi-dev openmpi-bin gnuplot-nox libpagmo-dev
+  # An optimised BLAS for LibTorch (it links libblas.so.3, the reference BLAS unless an alternative
+  # is installed): the serial OpenBLAS measured fastest per CPU second (docs/benchmarks.md).
+  libopenblas0-serial
 )
 missing=()
 for p in "${packages[@]}"; do

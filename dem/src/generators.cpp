@@ -10,6 +10,10 @@ namespace demcal::dem {
 namespace {
 
 constexpr double kDegree = std::numbers::pi / 180.0;
+// Below this springing-joint angle above horizontal the abutment's top is the springing face
+// extended: twice the contact search's default edge-angle tolerance (10 deg), so that the level
+// top and the springing face are never taken for one face.
+const double kFlatSpringingAngle = 2 * ContactSettings{}.edge_angle_tolerance;
 
 void check(bool ok, const std::string& flag, const std::string& rule, double value) {
   if (!ok) throw SceneError(flag, rule + ", got " + std::to_string(value));
@@ -105,7 +109,8 @@ void ArchOptions::Validate() const {
   check(kn > 0 && std::isfinite(kn), "--kn", "must be positive", kn);
   check(ks > 0 && std::isfinite(ks), "--ks", "must be positive", ks);
   check(friction_deg >= 0 && friction_deg < 90, "--friction-deg", "must be in [0, 90)", friction_deg);
-  check(contacts_per_joint >= 2, "--contacts-per-joint", "must be at least 2", contacts_per_joint);
+  check(contacts_per_joint >= 2 && contacts_per_joint <= 200, "--contacts-per-joint", "must be between 2 and 200",
+        contacts_per_joint);
   check(load_voussoir >= 1 && load_voussoir <= voussoirs, "--load-voussoir", "must be between 1 and --voussoirs",
         load_voussoir);
   check(velocity > 0 && std::isfinite(velocity), "--velocity", "must be positive", velocity);
@@ -130,15 +135,25 @@ Scene make_arch(const ArchOptions& o) {
   s.joint_group_rules = {{"voussoir", "voussoir", "any", "arch_joints"},
                          {"voussoir", "abutment", "any", "abutment_joints"}};
 
-  // Abutments: fixed blocks whose face matches the radial springing joint.
+  // Abutments: fixed blocks whose face matches the radial springing joint. A steep springing joint
+  // (segmental arch) gets a level top beside it; a springing joint close to horizontal (rise near
+  // span/2, the semicircle at the limit) would make that top nearly or exactly collinear with the
+  // joint (a degenerate, non-convex polygon, and two faces the contact search could confuse), so
+  // there the springing face itself is extended outward by abutment_depth.
   const Vec2 i0 = polar(centre, r_in, left), e0 = polar(centre, r_out, left);
   const double d = o.abutment_depth;
+  const double springing_tilt = std::numbers::pi - left;  // angle of the springing joint above horizontal
   Block abutment_left;
   abutment_left.name = "abutment_left";
   abutment_left.label = "abutment";
   abutment_left.density = o.density;
   abutment_left.fixed = true;
-  abutment_left.vertices = {i0, e0, {e0.x() - d, e0.y()}, {e0.x() - d, -d}, {i0.x(), -d}};
+  if (springing_tilt >= kFlatSpringingAngle) {
+    abutment_left.vertices = {i0, e0, {e0.x() - d, e0.y()}, {e0.x() - d, -d}, {i0.x(), -d}};
+  } else {
+    const Vec2 outer = e0 + d * (e0 - i0).normalized();
+    abutment_left.vertices = {i0, outer, {outer.x(), -d}, {i0.x(), -d}};
+  }
   s.blocks.push_back(abutment_left);
   for (int k = 0; k < o.voussoirs; ++k)
     s.blocks.push_back(voussoir("voussoir_" + std::to_string(k + 1), centre, r_in, r_out, left - k * step,
@@ -174,10 +189,21 @@ Scene make_arch(const ArchOptions& o) {
   return s;
 }
 
+void SemicircularArchOptions::Validate() const {
+  check(radius > 0 && std::isfinite(radius), "--radius", "must be positive", radius);
+  check(thickness_ratio > 0 && thickness_ratio < 1, "--thickness-ratio", "must be in (0, 1)", thickness_ratio);
+  check(voussoirs >= 3, "--voussoirs", "must be at least 3", voussoirs);
+  check(width > 0 && std::isfinite(width), "--width", "must be positive", width);
+  check(density > 0 && std::isfinite(density), "--density", "must be positive", density);
+  check(kn > 0 && std::isfinite(kn), "--kn", "must be positive", kn);
+  check(ks > 0 && std::isfinite(ks), "--ks", "must be positive", ks);
+  check(friction_deg >= 0 && friction_deg < 90, "--friction-deg", "must be in [0, 90)", friction_deg);
+  check(contacts_per_joint >= 2 && contacts_per_joint <= 200, "--contacts-per-joint", "must be between 2 and 200",
+        contacts_per_joint);
+}
+
 Scene make_semicircular_arch(const SemicircularArchOptions& o) {
-  check(o.radius > 0, "radius", "must be positive", o.radius);
-  check(o.thickness_ratio > 0 && o.thickness_ratio < 1, "thickness_ratio", "must be in (0, 1)", o.thickness_ratio);
-  check(o.voussoirs >= 3, "voussoirs", "must be at least 3", o.voussoirs);
+  o.Validate();
   Scene s;
   s.name = "semicircular-arch";
   s.width = o.width;
@@ -215,11 +241,13 @@ void WallOptions::Validate() const {
   check(kn > 0 && std::isfinite(kn), "--kn", "must be positive", kn);
   check(ks > 0 && std::isfinite(ks), "--ks", "must be positive", ks);
   check(friction_deg >= 0 && friction_deg < 90, "--friction-deg", "must be in [0, 90)", friction_deg);
-  check(contacts_per_joint >= 2, "--contacts-per-joint", "must be at least 2", contacts_per_joint);
+  check(contacts_per_joint >= 2 && contacts_per_joint <= 200, "--contacts-per-joint", "must be between 2 and 200",
+        contacts_per_joint);
   check(velocity > 0 && std::isfinite(velocity), "--velocity", "must be positive", velocity);
   check(max_displacement > 0 && std::isfinite(max_displacement), "--max-displacement", "must be positive", max_displacement);
-  check(beam_height > 0, "--beam-height", "must be positive", beam_height);
-  check(load_height >= 0, "--load-height", "must not be negative", load_height);
+  check(beam_height > 0 && std::isfinite(beam_height), "--beam-height", "must be positive", beam_height);
+  check(load_height >= 0 && std::isfinite(load_height), "--load-height", "must not be negative", load_height);
+  check(max_time >= 0 && std::isfinite(max_time), "--max-time", "must not be negative", max_time);
   check(actuator_stiffness > 0 && std::isfinite(actuator_stiffness), "--actuator-stiffness", "must be positive",
         actuator_stiffness);
 }
@@ -242,10 +270,11 @@ Scene make_wall(const WallOptions& o) {
   const int courses = std::max(1, static_cast<int>(std::lround(o.height / o.unit_height)));
   const double h = o.height / courses;
   for (int c = 0; c < courses; ++c) {
-    // Running bond: odd courses start with a half unit.
+    // Running bond: odd courses start with a half unit. A last piece shorter than a quarter unit
+    // is merged into its neighbour (a sliver would be a near-zero-mass block and a tiny time step).
     std::vector<double> edges = {0};
     double x = (c % 2 == 1) ? o.unit_length / 2 : o.unit_length;
-    while (x < o.length - 1e-9) {
+    while (x < o.length - o.unit_length / 4) {
       edges.push_back(x);
       x += o.unit_length;
     }

@@ -1,4 +1,4 @@
-// `demcal scene arch|wall [flags] -o scene.json`: write a generated scene.
+// `demcal scene arch|semicircle|wall [flags] -o scene.json`: write a generated scene.
 #include "command_registry.hpp"
 
 #include "demcal/dem/generators.hpp"
@@ -45,12 +45,12 @@ void add_effect_flags(CLI::App* app, EffectOptions& e, bool wall) {
 }
 
 void setup_scene(CLI::App& app) {
-  auto* scene = app.add_subcommand("scene", "Generate a scene JSON (reference arch or dry-joint wall)");
+  auto* scene = app.add_subcommand("scene", "Generate a scene JSON (reference arch, semicircular arch or dry-joint wall)");
   scene->require_subcommand(1);
 
   static ArchOptions arch;
   static std::string arch_out;
-  auto* a = scene->add_subcommand("arch", "Segmental arch on fixed abutments (defaults: the reference arch)");
+  auto* a = scene->add_subcommand("arch", "Segmental arch on fixed abutments, rise up to span/2 (defaults: the reference arch)");
   a->add_option("--span", arch.span, "Clear span at the intrados (m)")->capture_default_str();
   a->add_option("--rise", arch.rise, "Clear rise at the intrados (m)")->capture_default_str();
   a->add_option("--thickness", arch.thickness, "Radial thickness (m)")->capture_default_str();
@@ -71,6 +71,25 @@ void setup_scene(CLI::App& app) {
   a->callback([] {
     save_scene(make_arch(arch), arch_out);
     std::cout << "wrote " << arch_out << "\n";
+  });
+
+  static SemicircularArchOptions semi;
+  static std::string semi_out;
+  auto* c = scene->add_subcommand("semicircle",
+                                  "Semicircular arch on fixed bases, self-weight only (Milankovitch verification)");
+  c->add_option("--radius", semi.radius, "Centre-line radius (m)")->capture_default_str();
+  c->add_option("--thickness-ratio", semi.thickness_ratio, "Thickness / centre-line radius")->capture_default_str();
+  c->add_option("--voussoirs", semi.voussoirs, "Blocks in the ring")->capture_default_str();
+  c->add_option("--width", semi.width, "Out-of-plane width (m)")->capture_default_str();
+  c->add_option("--density", semi.density, "Unit density (kg/m^3)")->capture_default_str();
+  c->add_option("--kn", semi.kn, "Joint normal stiffness (Pa/m)")->capture_default_str();
+  c->add_option("--ks", semi.ks, "Joint shear stiffness (Pa/m)")->capture_default_str();
+  c->add_option("--friction-deg", semi.friction_deg, "Joint friction angle (degrees)")->capture_default_str();
+  c->add_option("--contacts-per-joint", semi.contacts_per_joint, "Contact points along a joint")->capture_default_str();
+  c->add_option("-o,--output", semi_out, "Scene file to write")->required();
+  c->callback([] {
+    save_scene(make_semicircular_arch(semi), semi_out);
+    std::cout << "wrote " << semi_out << "\n";
   });
 
   static WallOptions wall;

@@ -330,8 +330,25 @@ std::string format_curve(const Curve& curve) {
     if (c.values.size() != n)
       throw CurveError(curve.source + ": column '" + c.name + "' has " + std::to_string(c.values.size()) +
                        " values, others " + std::to_string(n));
-    if (c.name.empty() || c.name.find_first_of(",;\t\"\n\r[]") != std::string::npos)
-      throw CurveError(curve.source + ": column name '" + c.name + "' cannot be written (empty, or holds a separator, quote, bracket or newline)");
+    double v;
+    if (c.name.empty() || c.name.find_first_of(",;\t\"\n\r[]()") != std::string::npos ||
+        parse_cell(c.name, false, &v) != CellKind::text || parse_cell(c.name, true, &v) != CellKind::text)
+      throw CurveError(curve.source + ": column name '" + c.name +
+                       "' cannot be written (empty, a number, or holds a separator, quote, bracket, parenthesis or newline)");
+    if (c.unit.find_first_of(",;\t\"\n\r[]") != std::string::npos)
+      throw CurveError(curve.source + ": unit '" + c.unit + "' of column '" + c.name +
+                       "' cannot be written (holds a separator, quote, bracket or newline)");
+  }
+  // A preamble line that the reader would take for a data row (two or more numeric cells under any
+  // separator it detects) would move the header when the file is read back: refused.
+  for (std::size_t i = 0; i < curve.preamble.size(); ++i) {
+    const std::string& line = curve.preamble[i];
+    bool data_like = false;
+    for (const char sep : {'\t', ';', ','})
+      for (const bool dc : {false, true}) data_like = data_like || is_data_line(split(line, sep), dc);
+    if (trim(line).empty() || line.find_first_of("\n\r") != std::string::npos || data_like)
+      throw CurveError(curve.source + ": preamble line " + std::to_string(i + 1) + " '" + line +
+                       "' cannot be written (blank, holds a line break, or reads as a data row)");
   }
   std::string out;
   for (const auto& line : curve.preamble) out += line + "\n";
@@ -357,6 +374,9 @@ std::string format_curve(const Curve& curve) {
         out.append(buf.data(), ptr);
       }
     }
+    // One column: a trailing separator keeps the row recognisable as data (the reader needs two
+    // cells to detect the separator and drops a trailing empty cell).
+    if (curve.columns.size() == 1) out += ',';
     out += '\n';
   }
   return out;

@@ -12,7 +12,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string shared_db() { return std::string(DEMCAL_SHARED_DIR) + "/data/stone-masonry-db"; }
+// The Lourenço 2005 curves (data/walls) and their envelopes (data/walls/envelopes), bundled in the repository.
+std::string walls_dir() { return std::string(DEMCAL_SOURCE_DIR) + "/data/walls"; }
 
 // Expects parse_curve to throw a CurveError whose message holds every fragment.
 void expect_error(const std::string& text, const std::vector<std::string>& fragments) {
@@ -28,8 +29,8 @@ void expect_error(const std::string& text, const std::vector<std::string>& fragm
 
 TEST(Curve, ReadsEveryBundledFile) {
   int files = 0;
-  for (const char* folder : {"curves", "envelopes"}) {
-    for (const auto& entry : fs::directory_iterator(shared_db() + "/" + folder)) {
+  for (const std::string& folder : {walls_dir(), walls_dir() + "/envelopes"}) {
+    for (const auto& entry : fs::directory_iterator(folder)) {
       if (entry.path().extension() != ".csv") continue;
       const Curve c = read_curve(entry.path().string());
       ASSERT_EQ(c.column_names(), (std::vector<std::string>{"top_displacement", "horizontal_force", "drift"}))
@@ -56,7 +57,7 @@ TEST(Curve, ReadsEveryBundledFile) {
 }
 
 TEST(Curve, KeepsRepeatedAndDecreasingAbscissae) {
-  const Curve c = read_curve(shared_db() + "/curves/FD_SW2501_Lourenco2005.csv");
+  const Curve c = read_curve(walls_dir() + "/FD_SW2501_Lourenco2005.csv");
   const auto& x = c.column("top_displacement").values;
   // Rows 2 and 3 of the data repeat 0.08 mm with different forces.
   EXPECT_EQ(x[1], 0.08);
@@ -64,7 +65,7 @@ TEST(Curve, KeepsRepeatedAndDecreasingAbscissae) {
   EXPECT_EQ(c.column("horizontal_force").values[1], 11.6);
   EXPECT_EQ(c.column("horizontal_force").values[2], 12.4);
   // SW.30.1 steps back once.
-  const Curve sw301 = read_curve(shared_db() + "/curves/FD_SW301_Lourenco2005.csv");
+  const Curve sw301 = read_curve(walls_dir() + "/FD_SW301_Lourenco2005.csv");
   const auto& y = sw301.column("top_displacement").values;
   int decreasing = 0;
   for (std::size_t i = 1; i < y.size(); ++i) decreasing += y[i] < y[i - 1];
@@ -133,4 +134,49 @@ TEST(Curve, BadInputNamesFileLineAndColumn) {
   } catch (const CurveError& e) {
     EXPECT_NE(std::string(e.what()).find("ok.csv: no column 'force' (columns: a, b)"), std::string::npos) << e.what();
   }
+}
+
+// Regression cases found by fuzzing the reader (fuzz/csv_fuzz.cpp): every curve the reader returns
+// is either written so that it reads back equal, or refused by the writer with a CurveError.
+TEST(Curve, WriterRoundTripsOrRefusesWhatTheReaderAccepts) {
+  const auto round_trips = [](const std::string& text) {
+    const Curve c = parse_curve(text, "in.csv");
+    const Curve back = parse_curve(format_curve(c), "back.csv");
+    EXPECT_EQ(back.column_names(), c.column_names());
+    EXPECT_EQ(back.preamble, c.preamble);
+    ASSERT_EQ(back.rows(), c.rows());
+    for (std::size_t j = 0; j < c.columns.size(); ++j) {
+      EXPECT_EQ(back.columns[j].unit, c.columns[j].unit);
+      for (std::size_t i = 0; i < c.rows(); ++i) {
+        const double a = c.columns[j].values[i], b = back.columns[j].values[i];
+        EXPECT_TRUE((std::isnan(a) && std::isnan(b)) || a == b) << i << " " << a << " " << b;
+      }
+    }
+  };
+  // One column (trailing separators in the file): written with a trailing comma so it reads back.
+  round_trips("\n$2\n3,,\n4\n");
+  round_trips("x;y\n[mm];[kN]\n0,5;1\n1,5;nan\n2,5;3\n");
+  // A name holding a parenthesised unit after the unit was split off ("e)(N)(N)" reads as name
+  // "e)(N)", unit N): written as it is, the name would lose "(N)" on reading. Refused.
+  EXPECT_THROW(format_curve(parse_curve("pream)\te)(N)(N)\n0\t0\n1\t25\n2\tnan\n", "u.csv")), CurveError);
+
+  // A tab-separated file whose preamble holds a comma-separated numeric line: written with commas,
+  // that line would become the first data row. The writer refuses, naming the line.
+  const Curve preamble_data = parse_curve("0,0,0\nd\tf\n0\t1\n2\t3\n", "p.csv");
+  ASSERT_EQ(preamble_data.preamble, std::vector<std::string>{"0,0,0"});
+  try {
+    format_curve(preamble_data);
+    FAIL() << "a data-like preamble line was written";
+  } catch (const CurveError& e) {
+    EXPECT_NE(std::string(e.what()).find("preamble line 1 '0,0,0'"), std::string::npos) << e.what();
+  }
+  // Names the reader would split or read as numbers are refused too.
+  for (const std::string name : {"e (N)", "12", "nan"}) {
+    Curve c;
+    c.columns = {{name, "", {1, 2}}, {"y", "", {3, 4}}};
+    EXPECT_THROW(format_curve(c), CurveError) << name;
+  }
+  Curve bad_unit;
+  bad_unit.columns = {{"x", "m,m", {1, 2}}, {"y", "", {3, 4}}};
+  EXPECT_THROW(format_curve(bad_unit), CurveError);
 }

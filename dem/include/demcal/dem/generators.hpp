@@ -30,7 +30,9 @@ void apply_effects(Scene& scene, const EffectOptions& effects);
 
 // Segmental arch of equal voussoirs with radial joints between two fixed abutment blocks.
 // The geometry follows from the clear span and rise at the intrados: for the defaults an intrados
-// radius of 0.65 m and an opening half-angle of 67.38 deg.
+// radius of 0.65 m and an opening half-angle of 67.38 deg. Any rise in (0, span/2] is built, up to
+// the semicircle: where the springing joint is within 20 deg of horizontal the abutment's top is the
+// springing face extended by abutment_depth instead of a level top beside it.
 struct ArchOptions {
   double span = 1.2;                 // clear span at the intrados (m)
   double rise = 0.4;                 // clear rise at the intrados (m)
@@ -57,17 +59,21 @@ struct ArchOptions {
 Scene make_arch(const ArchOptions& options);
 
 // Semicircular arch with radial joints on two fixed bases, self-weight only (verification against
-// Milankovitch's minimum thickness). `radius` is the centre-line radius.
+// Milankovitch's minimum thickness, t/R = 0.1075 for radial joints). `radius` is the centre-line
+// radius. `demcal scene semicircle` writes it. (make_arch with rise = span/2 builds a loaded
+// semicircle on abutments instead.)
 struct SemicircularArchOptions {
-  double radius = 1.0;
-  double thickness_ratio = 0.115;  // t / R
+  double radius = 1.0;             // centre-line radius (m)
+  double thickness_ratio = 0.115;  // t / R, in (0, 1)
   int voussoirs = 31;
-  double width = 1.0;
-  double density = 2000;
-  double kn = 1e11;
-  double ks = 1e11;
-  double friction_deg = 70;
+  double width = 1.0;              // out-of-plane width (m)
+  double density = 2000;           // kg/m^3
+  double kn = 1e11;                // Pa/m
+  double ks = 1e11;                // Pa/m
+  double friction_deg = 70;        // degrees
   int contacts_per_joint = 15;
+
+  void Validate() const;  // throws SceneError naming the flag
 };
 Scene make_semicircular_arch(const SemicircularArchOptions& options);
 
