@@ -3,6 +3,8 @@
 #include <cmath>
 #include <map>
 
+using nlohmann::json;
+
 namespace demcal::pipelines {
 
 namespace {
@@ -65,6 +67,51 @@ std::vector<surrogate::TrainingRow> archive_training_rows(const RunArchive& arch
     rows.push_back({std::move(unit), std::isfinite(fitness) ? fitness : std::numeric_limits<double>::quiet_NaN()});
   }
   return rows;
+}
+
+ArchivedProblem find_archived_problem(const RunArchive& archive, const std::string& scene_hash,
+                                      const std::string& objective_key) {
+  ArchivedProblem p;
+  for (const auto& mo : archive.model_objectives()) {  // most rows first
+    if (!scene_hash.empty() && mo.model_hash != scene_hash) continue;
+    if (!objective_key.empty() && mo.objective_key != objective_key) continue;
+    p.model_hash = mo.model_hash;
+    p.objective_key = mo.objective_key;
+    break;
+  }
+  if (p.model_hash.empty())
+    throw ArchiveError(archive.path() + ": no scored run" + (scene_hash.empty() ? "" : " of scene hash " + scene_hash) +
+                       (objective_key.empty() ? "" : " with objective key " + objective_key));
+  // The newest campaign whose first evaluation ran this scene gives the parameter space.
+  const auto campaigns = archive.campaigns();
+  for (auto c = campaigns.rbegin(); c != campaigns.rend(); ++c) {
+    const auto evaluations = archive.evaluations(c->id);
+    bool ran_scene = false;
+    for (const auto& e : evaluations) {
+      for (auto id : e.run_ids)
+        if (auto run = archive.run(id); run && run->model_hash == p.model_hash) ran_scene = true;
+      break;
+    }
+    if (!ran_scene) continue;
+    try {
+      p.space = optimise::ParameterSpace::from_json(c->config.at("parameters"), archive.path() + ": campaign " + c->name);
+      if (c->config.contains("surrogate")) {
+        json options = c->config.at("surrogate");
+        options.erase("model");
+        options.erase("model_content_hash");
+        p.options = surrogate::SurrogateOptions::from_json(options, archive.path() + ": campaign " + c->name + ": surrogate");
+      }
+    } catch (const std::exception& e) {
+      throw ArchiveError(archive.path() + ": campaign '" + c->name + "': cannot read its parameter space: " + e.what());
+    }
+    p.campaign_name = c->name;
+    break;
+  }
+  if (p.campaign_name.empty())
+    throw ArchiveError(archive.path() + ": no campaign in the archive ran scene hash " + p.model_hash +
+                       " (its parameter space is unknown)");
+  p.rows = archive_training_rows(archive, p.space, {{p.model_hash, p.objective_key, 1.0}});
+  return p;
 }
 
 }  // namespace demcal::pipelines

@@ -222,3 +222,55 @@ TEST(SurrogateCampaign, KilledAndResumedEndsWithTheUninterruptedResult) {
   EXPECT_EQ(a.dump(), b.dump());
   EXPECT_GT(a["surrogate"]["screened_out"].get<long>(), 0);
 }
+
+// `demcal surrogate check` and `train` on a campaign's archive, and a trained model used by
+// `demcal calibrate --surrogate MODEL` (it screens from the first iteration on).
+TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
+  const auto dir = fresh_dir("cli");
+  json campaign = toy_campaign(dir);
+  campaign.erase("surrogate");
+  campaign["optimiser"]["max_evaluations"] = 40;
+  std::ofstream(dir / "campaign.json") << campaign.dump(2);
+  ASSERT_TRUE(calibrate(dir / "campaign.json", dir / "plain", false).ok());
+  const std::string archive = (dir / "plain" / "archive.sqlite").string();
+  auto demcal = [&](const std::vector<std::string>& args, const std::string& out) {
+    ProcessOptions o;
+    o.argv = {DEMCAL_BINARY};
+    o.argv.insert(o.argv.end(), args.begin(), args.end());
+    o.stdout_path = (dir / out).string();
+    o.stderr_path = (dir / (out + ".stderr")).string();
+    o.timeout_s = 120;
+    return run_process(o);
+  };
+  ASSERT_TRUE(demcal({"surrogate", "check", "--archive", archive}, "check.json").ok());
+  const json check = read_json(dir / "check.json");
+  RunArchive a(archive);
+  EXPECT_EQ(check["rows"].get<std::int64_t>(), a.run_count());
+  const json& cv = check["cross_validation"];
+  EXPECT_EQ(cv["finite_rows"].get<long>() + cv["failed_rows"].get<long>(), check["rows"].get<long>());
+  EXPECT_GE(cv["coverage90"].get<double>(), 0.0);
+  EXPECT_LE(cv["coverage90"].get<double>(), 1.0);
+  EXPECT_LT(cv["relative_error"].get<double>(), 1.0) << "better than predicting the mean";
+
+  ASSERT_TRUE(demcal({"surrogate", "train", "--archive", archive, "--out", (dir / "model.json").string()}, "train.json").ok());
+  EXPECT_EQ(read_json(dir / "model.json")["format"], "demcal-surrogate");
+  EXPECT_EQ(read_json(dir / "train.json")["rows"], check["rows"]);
+
+  const auto wrong = demcal({"surrogate", "train", "--archive", archive, "--scene-hash", "0123", "--out",
+                             (dir / "x.json").string()}, "wrong.json");
+  EXPECT_FALSE(wrong.ok());
+  std::ifstream err(dir / "wrong.json.stderr");
+  const std::string message((std::istreambuf_iterator<char>(err)), std::istreambuf_iterator<char>());
+  EXPECT_NE(message.find("0123"), std::string::npos) << message;
+
+  // A fresh archive, the trained model: screened from the first batch.
+  json with_model = toy_campaign(dir, 9);
+  with_model["surrogate"]["model"] = (dir / "model.json").string();
+  with_model["optimiser"]["max_evaluations"] = 12;
+  std::ofstream(dir / "with-model.json") << with_model.dump(2);
+  ASSERT_TRUE(calibrate(dir / "with-model.json", dir / "with-model", false).ok());
+  const json result = read_json(dir / "with-model" / "result.json");
+  EXPECT_EQ(result["surrogate"]["simulated"], 12);
+  // 8 proposed -> 4 simulated, twice; the last batch is cut to the 4 simulations left.
+  EXPECT_EQ(result["surrogate"]["screened_out"], 8);
+}

@@ -37,4 +37,21 @@ std::vector<surrogate::TrainingRow> archive_training_rows(const RunArchive& arch
 // The unit-cube point of a parameter set if it belongs to the space (see above), else empty.
 Eigen::VectorXd unit_point_in_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params);
 
+// What `demcal surrogate train|check` works on: one scene hash and objective key of an archive, the
+// parameter space of the newest campaign that ran that scene, and that campaign's surrogate options
+// (defaults if it had none).
+struct ArchivedProblem {
+  std::string model_hash;
+  std::string objective_key;
+  std::string campaign_name;
+  optimise::ParameterSpace space;
+  surrogate::SurrogateOptions options;
+  std::vector<surrogate::TrainingRow> rows;  // archive_training_rows of that scene and objective
+};
+// scene_hash "" = the (scene, objective) pair with the most scored runs; objective_key "" = the
+// scene's objective with the most scored runs. Throws ArchiveError naming the archive and the hash
+// when nothing matches.
+ArchivedProblem find_archived_problem(const RunArchive& archive, const std::string& scene_hash = "",
+                                      const std::string& objective_key = "");
+
 }  // namespace demcal::pipelines
