@@ -29,11 +29,20 @@ ARCH_ROWS = [  # label, algorithm, budget, surrogate options (None = off)
 
 
 def quartiles(values):
+    """q1, median, q3 (linear interpolation between order statistics); inf (target not reached)
+    sorts last, and a quartile that touches an inf is nan ("n/a")."""
     v = sorted(values)
     if not v:
         return (float("nan"),) * 3
-    q = statistics.quantiles(v, n=4, method="inclusive") if len(v) > 1 else [v[0]] * 3
-    return q[0], q[1], q[2]
+    out = []
+    for p in (0.25, 0.5, 0.75):
+        pos = p * (len(v) - 1)
+        lo, hi = int(pos), min(int(pos) + 1, len(v) - 1)
+        if v[hi] == float("inf") or v[lo] == float("inf"):
+            out.append(float("nan"))
+        else:
+            out.append(v[lo] + (pos - lo) * (v[hi] - v[lo]))
+    return tuple(out)
 
 
 def run_campaign(demcal, base, out, algorithm, budget, surrogate, seed, threads):
@@ -113,9 +122,7 @@ def arch_table(a, results, report):
             errors.append(abs(r["best"]["params"]["friction_deg"] - TRUE_FRICTION))
             finals.append(r["best"]["fitness"])
         reached = sum(1 for s in sims if s != float("inf"))
-        q = quartiles(sims) if reached == len(sims) else tuple(
-            x for x in quartiles([s if s != float("inf") else 10 ** 9 for s in sims]))
-        q = tuple(float("nan") if x >= 10 ** 9 else x for x in q)
+        q = quartiles(sims)
         lines.append("| %s | %d | %s | %d/%d | %s | %d/%d | %.0f |" % (
             label, budget, fmt_q(q), reached, len(sims), fmt_q(quartiles(errors), 2),
             sum(1 for e in errors if e <= 1.0), len(errors), statistics.median(finals)))
@@ -123,7 +130,7 @@ def arch_table(a, results, report):
                                  "friction_error_deg": errors, "final_fitness": finals}
     report["arch_best_known"] = best_known
     report["arch_truth_fitness"] = truth
-    return ["### Reference arch, hidden truth (kn 2.6e9, ks 0.9e9, friction 32.3 deg, 1.5 % noise), objective 2, %d seeds" % a.seeds,
+    return ["### Reference arch, hidden truth (kn 2.6e9, ks 0.9e9, friction 32.3 deg, 1.5 %% noise), objective 2, %d seeds" % a.seeds,
           "", "Best fitness known for the problem: %.1f (the truth's own: %.1f); target (+2 %%): %.1f." % (best_known, truth, target),
           "'n/a' in a quartile: fewer than that share of the seeds reached the target within the budget.", ""] + lines
 
