@@ -88,4 +88,30 @@ inline Eigen::VectorXd substitution_in_unit_cube(const std::string& name, const 
   return unit.cwiseMax(0.0).cwiseMin(1.0);
 }
 
+// Generator of the alternatives of candidate `index` at iteration `iteration` (optimiser.hpp):
+// seeded from (seed, iteration, index) by SplitMix64 steps, independent of the optimiser's stream.
+inline std::mt19937_64 alternatives_rng(std::uint64_t seed, int iteration, std::size_t index) {
+  auto mix = [](std::uint64_t z) {
+    z += 0x9e3779b97f4a7c15ULL;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+  };
+  return std::mt19937_64(mix(mix(mix(seed) ^ static_cast<std::uint64_t>(iteration)) ^ index));
+}
+
+// Candidates per iteration the planned schedule assumes (options.evaluations_per_iteration).
+inline int planned_batch(const OptimiserOptions& options) {
+  return options.evaluations_per_iteration > 0 ? options.evaluations_per_iteration : options.population;
+}
+
+// Checks the pending batch for alternatives() / withdraw().
+inline void check_pending_index(const std::string& name, const char* what, bool pending, int pending_count,
+                                std::size_t index) {
+  if (!pending) throw std::logic_error(name + ": " + what + "() needs a pending ask()");
+  if (index >= static_cast<std::size_t>(pending_count))
+    throw std::invalid_argument(name + ": " + what + "() index " + std::to_string(index) + " outside the batch of " +
+                                std::to_string(pending_count));
+}
+
 }  // namespace demcal::optimise::detail

@@ -99,6 +99,9 @@ void OptimiserOptions::Validate() const {
   if (elitism < 0 || elitism >= population)
     fail("option elitism = " + std::to_string(elitism) + " must lie in [0, population - 1 = " +
          std::to_string(population - 1) + "]");
+  if (evaluations_per_iteration < 0 || evaluations_per_iteration > population)
+    fail("option evaluations_per_iteration = " + std::to_string(evaluations_per_iteration) +
+         " must lie in [0, population = " + std::to_string(population) + "]");
   if (nlopt_population < 0) fail("option nlopt_population = " + std::to_string(nlopt_population) + " must be >= 0");
   for (std::size_t k = 0; k < initial_point.size(); ++k)
     if (!std::isfinite(initial_point[k]))
@@ -128,6 +131,14 @@ bool Optimiser::done() const { return status_ != OptimiserStatus::running; }
 
 void Optimiser::substitute(std::size_t, const Eigen::VectorXd&) {
   throw std::logic_error(name_ + ": this optimiser cannot accept substituted candidates");
+}
+
+std::vector<Eigen::VectorXd> Optimiser::alternatives(std::size_t, int) const {
+  throw std::logic_error(name_ + ": this optimiser cannot propose alternative candidates");
+}
+
+void Optimiser::withdraw(std::size_t) {
+  throw std::logic_error(name_ + ": this optimiser cannot withdraw candidates");
 }
 
 Eigen::VectorXd Optimiser::best_x() const {

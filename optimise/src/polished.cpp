@@ -56,6 +56,16 @@ class PolishedOptimiser final : public Optimiser {
     main_->substitute(index, physical_point);
   }
 
+  std::vector<Eigen::VectorXd> alternatives(std::size_t index, int count) const override {
+    if (polish_) throw std::logic_error(name_ + ": no alternatives during the polish (NLopt chose the point)");
+    return main_->alternatives(index, count);
+  }
+
+  void withdraw(std::size_t index) override {
+    if (polish_) throw std::logic_error(name_ + ": no withdrawal during the polish (NLopt chose the point)");
+    main_->withdraw(index);
+  }
+
   nlohmann::json save_state() const override {
     nlohmann::json s = save_common();
     s["main"] = main_->save_state();

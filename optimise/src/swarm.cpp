@@ -82,7 +82,11 @@ class SwarmOptimiser final : public Optimiser {
     fx_ = Eigen::VectorXd::Constant(n_, HUGE_VAL);
     trust_ = Eigen::MatrixXd::Zero(n_, n_);
     const long budget = options.evaluation_budget();
-    planned_iterations_ = static_cast<int>((budget + n_ - 1) / n_);
+    const long per_iteration = planned_batch(options);
+    planned_iterations_ = static_cast<int>((budget + per_iteration - 1) / per_iteration);
+    x_before_ = x_;
+    v_before_ = v_;
+    withdrawn_.assign(static_cast<std::size_t>(n_), false);
   }
 
   std::vector<Eigen::VectorXd> ask() override {
@@ -91,6 +95,7 @@ class SwarmOptimiser final : public Optimiser {
       const long remaining = options_.evaluation_budget() - evaluations_;
       pending_count_ = static_cast<int>(std::min<long>(n_, remaining));
       pending_ = true;
+      withdrawn_.assign(static_cast<std::size_t>(n_), false);
     }
     std::vector<Eigen::VectorXd> batch;
     for (int i = 0; i < pending_count_; ++i) batch.push_back(physical(x_.row(i).transpose()));
@@ -99,7 +104,16 @@ class SwarmOptimiser final : public Optimiser {
 
   void tell(const std::vector<double>& fitness) override {
     detail::check_told_batch(name_, pending_, pending_count_, fitness.size());
+    for (int i = 0; i < pending_count_; ++i)
+      if (withdrawn_[static_cast<std::size_t>(i)] && !std::isnan(fitness[static_cast<std::size_t>(i)]))
+        throw std::invalid_argument(name_ + ": tell() got a value for withdrawn candidate " + std::to_string(i) +
+                                    " (pass NaN: a withdrawn candidate is not evaluated)");
     for (int i = 0; i < pending_count_; ++i) {
+      if (withdrawn_[static_cast<std::size_t>(i)]) {
+        x_.row(i) = x_before_.row(i);  // the move is undone; fx_, p_, fp_ keep what was evaluated
+        v_.row(i) = v_before_.row(i);
+        continue;
+      }
       fx_[i] = record(x_.row(i).transpose(), fitness[static_cast<std::size_t>(i)]);
       if (fx_[i] <= fp_[i]) {
         fp_[i] = fx_[i];
@@ -120,7 +134,36 @@ class SwarmOptimiser final : public Optimiser {
   void substitute(std::size_t index, const Eigen::VectorXd& physical_point) override {
     const Eigen::VectorXd unit =
         detail::substitution_in_unit_cube(name_, space_, pending_, pending_count_, index, physical_point);
-    x_.row(static_cast<Eigen::Index>(index)) = unit.transpose();
+    const auto i = static_cast<Eigen::Index>(index);
+    x_.row(i) = unit.transpose();
+    if (moved_) v_.row(i) = x_.row(i) - x_before_.row(i);  // the move that reaches the substitute
+  }
+
+  std::vector<Eigen::VectorXd> alternatives(std::size_t index, int count) const override {
+    detail::check_pending_index(name_, "alternatives", pending_, pending_count_, index);
+    std::mt19937_64 rng = alternatives_rng(options_.seed, iteration_, index);
+    std::vector<Eigen::VectorXd> out;
+    const auto i = static_cast<Eigen::Index>(index);
+    if (!moved_) {  // the first batch is uniform random: so are its alternatives
+      for (int c = 0; c < count; ++c) {
+        Eigen::VectorXd u(d_);
+        for (int k = 0; k < d_; ++k) u[k] = uniform01(rng);
+        out.push_back(physical(u));
+      }
+      return out;
+    }
+    const MoveTerms terms = move_terms();
+    Eigen::RowVectorXd x(d_), v(d_);
+    for (int c = 0; c < count; ++c) {
+      draw_move(i, rng, terms, x, v);
+      out.push_back(physical(x.transpose()));
+    }
+    return out;
+  }
+
+  void withdraw(std::size_t index) override {
+    detail::check_pending_index(name_, "withdraw", pending_, pending_count_, index);
+    withdrawn_[index] = true;
   }
 
   nlohmann::json save_state() const override {
@@ -134,6 +177,13 @@ class SwarmOptimiser final : public Optimiser {
     s["rng"] = rng_to_string(rng_);
     s["pending"] = pending_;
     s["pending_count"] = pending_count_;
+    s["x_before"] = matrix_to_json(x_before_);
+    s["v_before"] = matrix_to_json(v_before_);
+    s["moved"] = moved_;
+    nlohmann::json withdrawn = nlohmann::json::array();
+    for (std::size_t i = 0; i < withdrawn_.size(); ++i)
+      if (withdrawn_[i]) withdrawn.push_back(i);
+    s["withdrawn"] = withdrawn;
     return s;
   }
 
@@ -159,6 +209,18 @@ class SwarmOptimiser final : public Optimiser {
     rng_from_string(rng_, state_field(state, "rng").get<std::string>());
     pending_ = state_field(state, "pending").get<bool>();
     pending_count_ = state_field(state, "pending_count").get<int>();
+    // States written before pre-screening existed have no pre-move record: the move is then not
+    // redrawable, which only matters to alternatives().
+    x_before_ = state.contains("x_before") ? matrix("x_before", n_, d_) : x_;
+    v_before_ = state.contains("v_before") ? matrix("v_before", n_, d_) : v_;
+    moved_ = state.contains("moved") ? state.at("moved").get<bool>() : iteration_ > 0;
+    withdrawn_.assign(static_cast<std::size_t>(n_), false);
+    if (state.contains("withdrawn"))
+      for (const auto& i : state.at("withdrawn")) {
+        const auto index = i.get<std::size_t>();
+        if (index >= withdrawn_.size()) throw std::invalid_argument(name_ + " state: 'withdrawn' index out of range");
+        withdrawn_[index] = true;
+      }
   }
 
  private:
@@ -177,25 +239,52 @@ class SwarmOptimiser final : public Optimiser {
     return options_.inertia_start - (options_.inertia_start - options_.inertia_end) * std::min(1.0, t);
   }
 
-  void move() {
-    const double phi1 = trust_based_ ? options_.tbpso_cognitive : options_.pso_cognitive;
-    const double phi2 = trust_based_ ? options_.tbpso_social : options_.pso_social;
-    const double phi3 = trust_based_ ? options_.tbpso_trust : 0.0;
-    const double k_factor = options_.constriction ? constriction_factor(phi1 + phi2 + phi3) : 1.0;
-    const double omega = inertia();
-    const double vmax = options_.max_velocity;
-    const Eigen::VectorXd g = global_best();
+  // Everything a move depends on besides the random coefficients (fixed between tell() and the
+  // next tell(), so alternatives() redraws exactly the move that was made).
+  struct MoveTerms {
+    double phi1, phi2, phi3, k_factor, omega;
+    Eigen::VectorXd g;
     Eigen::MatrixXd pull;
-    if (trust_based_) pull = tbpso_trust_pull(x_, trust_, direction_);
+  };
+  MoveTerms move_terms() const {
+    MoveTerms t;
+    t.phi1 = trust_based_ ? options_.tbpso_cognitive : options_.pso_cognitive;
+    t.phi2 = trust_based_ ? options_.tbpso_social : options_.pso_social;
+    t.phi3 = trust_based_ ? options_.tbpso_trust : 0.0;
+    t.k_factor = options_.constriction ? constriction_factor(t.phi1 + t.phi2 + t.phi3) : 1.0;
+    t.omega = inertia();
+    t.g = global_best();
+    if (trust_based_) t.pull = tbpso_trust_pull(x_before_, trust_, direction_);
+    return t;
+  }
+
+  void move() {
+    x_before_ = x_;
+    v_before_ = v_;
+    moved_ = true;
+    const MoveTerms terms = move_terms();
+    Eigen::RowVectorXd x(d_), v(d_);
     for (int i = 0; i < n_; ++i) {
+      draw_move(i, rng_, terms, x, v);
+      x_.row(i) = x;
+      v_.row(i) = v;
+    }
+  }
+
+  // Particle i's move from (x_before_, v_before_) with coefficients drawn from rng (eqs. 1-15).
+  void draw_move(Eigen::Index i, std::mt19937_64& rng, const MoveTerms& t, Eigen::RowVectorXd& x_out,
+                 Eigen::RowVectorXd& v_out) const {
+    const double vmax = options_.max_velocity;
+    {
       for (int k = 0; k < d_; ++k) {
-        const double r1 = uniform01(rng_);
-        const double r2 = uniform01(rng_);
-        double v = omega * v_(i, k) + phi1 * r1 * (p_(i, k) - x_(i, k)) + phi2 * r2 * (g[k] - x_(i, k));
-        if (trust_based_) v += phi3 * uniform01(rng_) * pull(i, k);
-        v *= k_factor;
+        const double r1 = uniform01(rng);
+        const double r2 = uniform01(rng);
+        double v = t.omega * v_before_(i, k) + t.phi1 * r1 * (p_(i, k) - x_before_(i, k)) +
+                   t.phi2 * r2 * (t.g[k] - x_before_(i, k));
+        if (trust_based_) v += t.phi3 * uniform01(rng) * t.pull(i, k);
+        v *= t.k_factor;
         if (vmax > 0.0) v = std::clamp(v, -vmax, vmax);
-        double x = x_(i, k) + v;
+        double x = x_before_(i, k) + v;
         if (x < 0.0 || x > 1.0) {
           if (options_.bounds == BoundHandling::reflect) {
             x = x < 0.0 ? -x : 2.0 - x;
@@ -206,8 +295,8 @@ class SwarmOptimiser final : public Optimiser {
             v = 0.0;
           }
         }
-        x_(i, k) = x;
-        v_(i, k) = v;
+        x_out[k] = x;
+        v_out[k] = v;
       }
     }
   }
@@ -218,6 +307,9 @@ class SwarmOptimiser final : public Optimiser {
   int planned_iterations_ = 1;
   Eigen::MatrixXd x_, v_, p_, trust_;
   Eigen::VectorXd fp_, fx_;
+  Eigen::MatrixXd x_before_, v_before_;  // positions and velocities before the last move
+  bool moved_ = false;                   // false while the batch is the initial random one
+  std::vector<bool> withdrawn_;          // per particle of the pending batch
   std::mt19937_64 rng_;
   bool pending_ = false;
   int pending_count_ = 0;

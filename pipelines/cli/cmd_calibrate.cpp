@@ -14,7 +14,7 @@ namespace {
 
 struct CalibrateFlags {
   std::string campaign_file;
-  std::string scene, generator, experiment, out, archive, name, algorithm, backend, command;
+  std::string scene, generator, experiment, out, archive, name, algorithm, backend, command, surrogate;
   std::vector<std::string> params, mappings, generator_options;
   int iterations = 0, swarm = 0, objective = 0, threads = -1, fitness_threads = -1;
   long polish = -1;
@@ -92,6 +92,14 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
     c.polish.enabled = true;
     c.polish.options.max_evaluations = f.polish;
   }
+  if (f.surrogate == "off") {
+    c.surrogate.enabled = false;
+  } else if (f.surrogate == "on") {
+    c.surrogate.enabled = true;
+  } else if (!f.surrogate.empty()) {
+    c.surrogate.enabled = true;
+    c.surrogate.model_file = f.surrogate;
+  }
   if (!f.out.empty()) c.output = f.out;
   if (!f.archive.empty()) c.archive = f.archive;
   if (f.no_report) c.report = false;
@@ -145,10 +153,12 @@ void setup(CLI::App& app) {
   sub->add_option("--experiment", flags->experiment, "Measured curve CSV");
   sub->add_option("--map", flags->mappings, "Measured column mapping TARGET=COLUMN[:UNIT[:SCALE]] (repeatable)");
   sub->add_option("--param", flags->params, "NAME=LOWER:UPPER[:log] | NAME=fixed:VALUE | NAME=tied:SOURCE:RATIO (repeatable)");
-  sub->add_option("--algorithm", flags->algorithm, "pso | tbpso | ga | nlopt:NAME");
+  sub->add_option("--algorithm", flags->algorithm, "pso | tbpso | ga | nlopt:NAME | bo (Bayesian optimisation)");
+  sub->add_option("--surrogate", flags->surrogate,
+                  "Pre-screen candidates with a surrogate: on | off | MODEL (a file from demcal surrogate train)");
   sub->add_option("--iterations", flags->iterations, "Iterations (generations)");
   sub->add_option("--swarm,--population", flags->swarm, "Candidates per iteration");
-  sub->add_option("--max-simulations", flags->max_simulations, "Evaluation budget (wins over --iterations)");
+  sub->add_option("--max-simulations", flags->max_simulations, "Simulation budget (wins over --iterations; with --surrogate it counts simulations)");
   sub->add_option("--objective", flags->objective, "Objective function 1 or 2");
   sub->add_option("--seed", flags->seed, "Random seed");
   sub->add_option("--backend", flags->backend, "threads | command | mpi");

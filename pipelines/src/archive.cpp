@@ -466,6 +466,60 @@ std::vector<RunRecord> RunArchive::runs_with_status(const std::string& status) c
   return out;
 }
 
+std::int64_t RunArchive::max_run_id() const {
+  Statement s(db_, path_, "SELECT COALESCE(MAX(id), 0) FROM runs");
+  s.step();
+  return s.integer(0);
+}
+
+std::vector<RunFitness> RunArchive::run_fitness(const std::string& model_hash, const std::string& objective_key,
+                                                std::int64_t max_run_id) const {
+  Statement s(db_, path_,
+              "SELECT runs.id, runs.param_key, runs.status, fitness.fitness FROM runs JOIN fitness"
+              " ON fitness.run_id = runs.id WHERE runs.model_hash=? AND fitness.objective_key=? AND runs.id<=?"
+              " ORDER BY runs.id");
+  s.bind(1, model_hash);
+  s.bind(2, objective_key);
+  s.bind(3, max_run_id);
+  std::vector<RunFitness> out;
+  while (s.step()) {
+    RunFitness r;
+    r.run_id = s.integer(0);
+    r.params = params_from_key(s.text(1));
+    r.status = s.text(2);
+    r.fitness = s.real(3);
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+std::vector<RunArchive::ModelObjective> RunArchive::model_objectives() const {
+  Statement s(db_, path_,
+              "SELECT runs.model_hash, fitness.objective_key, COUNT(*) AS n FROM runs JOIN fitness"
+              " ON fitness.run_id = runs.id GROUP BY runs.model_hash, fitness.objective_key"
+              " ORDER BY n DESC, runs.model_hash, fitness.objective_key");
+  std::vector<ModelObjective> out;
+  while (s.step()) out.push_back({s.text(0), s.text(1), s.integer(2)});
+  return out;
+}
+
+std::vector<CampaignRecord> RunArchive::campaigns() const {
+  Statement s(db_, path_,
+              "SELECT id, name, config_key, config_json, code_version, created_at FROM campaigns ORDER BY id");
+  std::vector<CampaignRecord> out;
+  while (s.step()) {
+    CampaignRecord c;
+    c.id = s.integer(0);
+    c.name = s.text(1);
+    c.config_key = s.text(2);
+    c.config = nlohmann::json::parse(s.text(3));
+    c.code_version = s.text(4);
+    c.created_at = s.text(5);
+    out.push_back(std::move(c));
+  }
+  return out;
+}
+
 void RunArchive::put_fitness(const FitnessRecord& f) {
   Transaction transaction(*this);
   Statement s(db_, path_,

@@ -5,6 +5,7 @@
 #include "demcal/pipelines/mpi.hpp"
 #include "demcal/pipelines/progress.hpp"
 #include "demcal/pipelines/report.hpp"
+#include "demcal/pipelines/surrogate_data.hpp"
 #include "demcal/pipelines/version.hpp"
 
 #include <algorithm>
@@ -17,6 +18,7 @@
 #include <condition_variable>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 
@@ -307,6 +309,12 @@ json CampaignResult::to_json() const {
           {"wall_time_s", wall_time_s},
           {"identifiability", identifiability.to_json()},
           {"session", {{"simulated", simulated_this_session}, {"reused_from_archive", reused_from_archive}}}};
+  if (surrogate_used)
+    j["surrogate"] = {{"kind", surrogate_kind},
+                      {"screened", surrogate_screened},
+                      {"simulated", surrogate_simulated},
+                      {"screened_out", surrogate_screened_out},
+                      {"cv_error", finite_or_null(surrogate_cv_error)}};
   if (polished)
     j["polish"] = {{"evaluations", polish_evaluations}, {"swarm_best_fitness", finite_or_null(swarm_best_fitness)},
                    {"status", polish_status}};
@@ -322,14 +330,67 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
   if (ec) throw CampaignError(config.output + ": cannot create the output folder: " + ec.message());
 
   Prepared prepared = prepare(config);
+  auto backend = make_backend(config, prepared, options);
+  RunArchive archive(config.archive.empty() ? (fs::path(config.output) / "archive.sqlite").string() : config.archive);
+  const json defining = config.result_defining_json();
+  const std::string config_key = hash_text(defining.dump());
+  std::optional<CampaignRecord> previous;
+  if (options.resume) previous = archive.latest_campaign(config_key);
+
+  // Surrogate: trained on the archive's runs of these scenes and objectives up to the horizon (the
+  // newest run when the campaign started, kept in the campaign record so a resume sees the same
+  // earlier runs) plus this campaign's committed evaluations.
+  const bool bayes = config.optimiser.algorithm == "bo";
+  const bool screening = config.surrogate.enabled && !bayes;
+  const std::int64_t horizon = previous && previous->config.contains("surrogate_run_horizon")
+                                   ? previous->config.at("surrogate_run_horizon").get<std::int64_t>()
+                                   : archive.max_run_id();
+  std::vector<ArchivedCase> archived_cases;
+  for (size_t k = 0; k < config.cases.size(); ++k)
+    archived_cases.push_back({backend->model_hash(k), prepared.objective_keys[k], config.cases[k].weight});
+  std::optional<surrogate::SurrogateModel> trained_model;
+  if (screening && !config.surrogate.model_file.empty()) {
+    std::ifstream in(config.surrogate.model_file);
+    try {
+      trained_model = surrogate::SurrogateModel::from_json(json::parse(in), config.surrogate.model_file);
+    } catch (const std::exception& e) {
+      throw CampaignError(config.surrogate.model_file + ": " + e.what());
+    }
+    if (trained_model->gp().dimension() != config.space.dimension())
+      throw CampaignError(config.surrogate.model_file + ": the model has " +
+                          std::to_string(trained_model->gp().dimension()) + " parameters, the campaign " +
+                          std::to_string(config.space.dimension()));
+  }
+  // Rows: earlier runs (<= horizon), then this campaign's evaluations, each parameter set once.
+  auto training_rows = [&](std::int64_t campaign) {
+    std::vector<surrogate::TrainingRow> rows;
+    std::set<std::vector<double>> seen;  // unit points (computed the same way for the same parameters)
+    auto add = [&](surrogate::TrainingRow row) {
+      if (seen.insert(std::vector<double>(row.unit.data(), row.unit.data() + row.unit.size())).second)
+        rows.push_back(std::move(row));
+    };
+    for (auto& r : archive_training_rows(archive, config.space, archived_cases, horizon)) add(std::move(r));
+    for (const auto& e : archive.evaluations(campaign)) {
+      Eigen::VectorXd unit = unit_point_in_space(config.space, e.params);
+      if (unit.size() > 0) add({std::move(unit), e.fitness});
+    }
+    return rows;
+  };
+
   std::unique_ptr<optimise::Optimiser> optimiser;
   try {
-    optimiser = optimise::make_optimiser(config.space, config.optimiser);
+    if (bayes) {
+      optimise::OptimiserOptions o = config.optimiser;
+      optimiser = surrogate::make_bayes_optimiser(config.space, o, config.surrogate.options,
+                                                  archive_training_rows(archive, config.space, archived_cases, horizon));
+    } else {
+      optimise::OptimiserOptions o = config.optimiser;
+      if (screening && config.surrogate.options.k > 0) o.evaluations_per_iteration = config.surrogate.options.k;
+      optimiser = optimise::make_optimiser(config.space, o);
+    }
   } catch (const std::exception& e) {
     throw CampaignError(config.source + ": " + e.what());
   }
-  auto backend = make_backend(config, prepared, options);
-  RunArchive archive(config.archive.empty() ? (fs::path(config.output) / "archive.sqlite").string() : config.archive);
 
   // The saved optimiser state: the swarm's alone, or with a polish {"swarm": ..., "polish": ...|null}.
   std::unique_ptr<optimise::Optimiser> polisher;
@@ -337,7 +398,9 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
     if (!config.polish.enabled) return optimiser->save_state();
     return {{"swarm", optimiser->save_state()}, {"polish", polisher ? polisher->save_state() : json(nullptr)}};
   };
-  auto load_optimisers = [&](const json& state) {
+  auto load_optimisers = [&](const json& saved) {
+    // With pre-screening the state is {"optimiser": ..., "screening": this iteration's record}.
+    const json& state = screening ? saved.at("optimiser") : saved;
     if (!config.polish.enabled) return optimiser->load_state(state);
     optimiser->load_state(state.at("swarm"));
     if (!state.at("polish").is_null()) {
@@ -346,12 +409,10 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
     }
   };
 
-  const json defining = config.result_defining_json();
-  const std::string config_key = hash_text(defining.dump());
   std::int64_t campaign_id = 0;
   int next_iteration = 0;
   if (options.resume) {
-    if (auto previous = archive.latest_campaign(config_key)) {
+    if (previous) {
       campaign_id = previous->id;
       if (auto last = archive.last_iteration(campaign_id)) {
         try {
@@ -373,6 +434,7 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
     record.name = config.name;
     record.config_key = config_key;
     record.config = config.to_json();
+    record.config["surrogate_run_horizon"] = horizon;
     record.code_version = version();
     campaign_id = archive.create_campaign(record);
   }
@@ -401,11 +463,41 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
   for (int iteration = next_iteration;; ++iteration) {
     optimise::Optimiser* asking = active();
     if (!asking) break;
-    const std::vector<Eigen::VectorXd> batch = asking->ask();
+    std::vector<Eigen::VectorXd> batch = asking->ask();
     if (batch.empty()) break;
     progress.iteration = iteration + 1;
+    // Pre-screening: the model ranks a pool, substitutes the best of each slot's pool and withdraws
+    // all but the best k slots; only the kept slots are simulated.
+    std::vector<size_t> slots(batch.size());
+    for (size_t i = 0; i < batch.size(); ++i) slots[i] = i;
+    json screen_record = nullptr;
+    std::optional<surrogate::ScreenReport> screen;
+    if (screening && asking == optimiser.get() && asking->can_substitute()) {
+      const auto rows = training_rows(campaign_id);
+      long finite = 0;
+      for (const auto& r : rows) finite += std::isfinite(r.fitness) ? 1 : 0;
+      surrogate::SurrogateModel model(config.surrogate.options);
+      bool usable = false;
+      if (trained_model) {
+        model = *trained_model;
+        usable = finite >= config.surrogate.options.min_runs ? model.condition(rows) : model.usable();
+      } else if (finite >= config.surrogate.options.min_runs) {
+        usable = model.fit(rows);
+      }
+      if (usable) {
+        screen = surrogate::prescreen(*asking, model, config.surrogate.options);
+        batch = asking->ask();
+        slots.clear();
+        for (const auto& c : screen->candidates)
+          if (c.simulated) slots.push_back(static_cast<size_t>(c.slot));
+        std::sort(slots.begin(), slots.end());
+        screen_record = screen->to_json();
+        screen_record["training_rows"] = model.training_rows();
+        screen_record["log_transform"] = model.gp().log_transformed();
+      }
+    }
     std::vector<std::map<std::string, double>> candidates;
-    for (const auto& x : batch) candidates.push_back(config.space.values(x));
+    for (size_t slot : slots) candidates.push_back(config.space.values(batch[slot]));
 
     // Runs: from the archive where they exist, else simulated (each committed as it finishes).
     // Fitness jobs start as soon as a run is available, on their own workers.
@@ -487,17 +579,34 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
       EvaluationRecord e;
       e.campaign_id = campaign_id;
       e.iteration = iteration;
-      e.position = static_cast<int>(c);
+      e.position = static_cast<int>(slots[c]);
       e.params = candidates[c];
       e.run_ids = run_ids[c];
       e.fitness = fitness[c];
       evaluations.push_back(std::move(e));
     }
-    asking->tell(fitness);
+    // The optimiser hears simulated values only: NaN (not evaluated) for withdrawn slots.
+    std::vector<double> told(batch.size(), std::numeric_limits<double>::quiet_NaN());
+    for (size_t c = 0; c < slots.size(); ++c) told[slots[c]] = fitness[c];
+    asking->tell(told);
+    if (screen) {  // the model's error on what was simulated, for the report
+      double error_sum = 0;
+      long error_count = 0;
+      for (size_t c = 0; c < slots.size(); ++c) {
+        auto& entry = screen_record["candidates"][slots[c]];
+        entry["simulated_fitness"] = finite_or_null(fitness[c]);
+        if (std::isfinite(fitness[c]) && fitness[c] != 0) {
+          error_sum += std::abs(entry["predicted_fitness"].get<double>() - fitness[c]) / std::abs(fitness[c]);
+          ++error_count;
+        }
+      }
+      screen_record["mean_relative_error"] = error_count > 0 ? json(error_sum / error_count) : json(nullptr);
+    }
     IterationRecord record;
     record.campaign_id = campaign_id;
     record.iteration = iteration;
-    record.optimiser_state = save_optimisers().dump();
+    record.optimiser_state =
+        (screening ? json{{"optimiser", save_optimisers()}, {"screening", screen_record}} : save_optimisers()).dump();
     record.best_fitness = std::min(optimiser->best_value(), polisher ? polisher->best_value() : INFINITY);
     record.evaluations = static_cast<int>(optimiser->evaluations() + (polisher ? polisher->evaluations() : 0));
     record.wall_time_s = elapsed();
@@ -535,6 +644,24 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
     result.polish_status = polisher ? optimise::to_string(polisher->status()) : "not started";
   }
   result.identifiability = identifiability(result.all, config);
+  if (screening || bayes) {
+    result.surrogate_used = true;
+    result.surrogate_kind = config.surrogate.options.kind;
+    for (const auto& it : archive.iterations(campaign_id)) {
+      const json state = json::parse(it.optimiser_state);
+      if (!screening || state.at("screening").is_null()) continue;
+      json entry = state.at("screening");
+      entry["iteration"] = it.iteration;
+      result.surrogate_screened += entry.at("pool").get<long>();
+      result.surrogate_simulated += entry.at("simulated").get<long>();
+      result.surrogate_screened_out += static_cast<long>(entry.at("candidates").size()) - entry.at("simulated").get<long>();
+      result.surrogate_iterations.push_back(std::move(entry));
+    }
+    if (bayes) result.surrogate_simulated = result.candidates;
+    surrogate::SurrogateModel final_model(config.surrogate.options);
+    if (final_model.fit(training_rows(campaign_id)))
+      result.surrogate_cv_error = final_model.gp().leave_one_out().relative_error;
+  }
   if (!std::isfinite(best)) {
     result.status = CampaignStatus::failed;
     result.message = "no run gave a finite fitness (" + std::to_string(result.failed_runs) + " failed)";

@@ -296,6 +296,34 @@ double unit_factor(const std::string& unit, const std::string& where) {
   return it->second;
 }
 
+void parse_surrogate(const json& j, SurrogateSpec& spec, const std::string& where, const std::string& base_dir) {
+  if (!j.is_object()) throw CampaignError(where + ": expected an object");
+  json options = j;
+  if (options.contains("model")) {
+    const json& model = options.at("model");
+    if (!model.is_string()) throw CampaignError(where + ".model: expected a file name, got " + model.dump());
+    fs::path file = model.get<std::string>();
+    if (file.is_relative()) file = fs::path(base_dir) / file;
+    spec.model_file = file.string();
+    options.erase("model");
+  }
+  try {
+    spec.options = surrogate::SurrogateOptions::from_json(options, where);
+  } catch (const std::exception& e) {
+    throw CampaignError(e.what());
+  }
+  spec.enabled = true;
+}
+
+json surrogate_to_json(const SurrogateSpec& spec) {
+  json j = spec.options.to_json();
+  if (!spec.model_file.empty()) {
+    j["model"] = spec.model_file;
+    j["model_content_hash"] = file_hash(spec.model_file);
+  }
+  return j;
+}
+
 void CampaignConfig::Validate() const {
   // The backend first: whether a case needs a scene depends on it.
   if (backend.type != "threads" && backend.type != "command" && backend.type != "mpi")
@@ -323,7 +351,13 @@ void CampaignConfig::Validate() const {
     throw CampaignError(source + ": parameters: " + e.what());
   }
   try {
-    optimiser.Validate();
+    if (optimiser.algorithm == "bo") {  // the surrogate module's optimiser: the shared options still apply
+      optimise::OptimiserOptions shared = optimiser;
+      shared.algorithm = "pso";
+      shared.Validate();
+    } else {
+      optimiser.Validate();
+    }
     objective_options.Validate();
     smoother.Validate();
   } catch (const std::exception& e) {
@@ -342,6 +376,18 @@ void CampaignConfig::Validate() const {
     } catch (const std::exception& e) {
       throw CampaignError(source + ": polish: " + e.what());
     }
+  }
+  if (surrogate.enabled || optimiser.algorithm == "bo") {
+    try {
+      surrogate.options.Validate();
+    } catch (const std::exception& e) {
+      throw CampaignError(source + ": surrogate: " + e.what());
+    }
+    if (!surrogate.model_file.empty() && !fs::exists(surrogate.model_file))
+      throw CampaignError(source + ": surrogate.model: no such file: " + surrogate.model_file);
+    if (surrogate.options.k > optimiser.population)
+      throw CampaignError(source + ": surrogate.k = " + std::to_string(surrogate.options.k) +
+                          " exceeds the population " + std::to_string(optimiser.population));
   }
   if (!(identifiability_band >= 0) || !std::isfinite(identifiability_band))
     throw CampaignError(source + ": identifiability.relative_band: must be >= 0, got " +
@@ -365,6 +411,7 @@ json CampaignConfig::result_defining_json() const {
             {"optimiser", optimiser_to_json(optimiser)}};
   if (backend.type == "command") j["command"] = backend.command;
   if (polish.enabled) j["polish"] = polish_to_json(polish);  // absent otherwise: older keys unchanged
+  if (surrogate.enabled || optimiser.algorithm == "bo") j["surrogate"] = surrogate_to_json(surrogate);
   return j;
 }
 
@@ -385,7 +432,7 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
   c.source = source;
   reject_unknown_keys(j, {"name", "scene", "measured", "cases", "parameters", "fixed", "tied", "objective",
                           "optimiser", "backend", "output", "archive", "report", "description", "polish",
-                          "identifiability"},
+                          "identifiability", "surrogate"},
                       source);
   read_field(j, "name", c.name, source);
   if (j.contains("cases")) {
@@ -457,6 +504,7 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
     }
   }
   if (j.contains("polish")) parse_polish(j.at("polish"), c.polish, source + ": polish");
+  if (j.contains("surrogate")) parse_surrogate(j.at("surrogate"), c.surrogate, source + ": surrogate", base_dir);
   if (j.contains("identifiability")) {
     const std::string where = source + ": identifiability";
     reject_unknown_keys(j.at("identifiability"), {"relative_band"}, where);

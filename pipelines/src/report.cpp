@@ -372,6 +372,46 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
     }
     md << "\n";
   }
+  if (result.surrogate_used) {
+    md << "## Surrogate\n\n";
+    const long proposed = result.surrogate_simulated + result.surrogate_screened_out;
+    md << "Model: " << result.surrogate_kind << " (Gaussian process, ARD Matern-5/2, fitted nugget); acquisition "
+       << surrogate::to_string(config.surrogate.options.acquisition) << ". Leave-one-out relative error of the final model: "
+       << (std::isfinite(result.surrogate_cv_error) ? fmt(result.surrogate_cv_error, "%.3f") : std::string("n/a"))
+       << " (0 = exact, 1 = no better than the mean).\n\n";
+    if (config.optimiser.algorithm == "bo") {
+      md << "Bayesian optimisation: every candidate after the initial design was the acquisition's optimum; "
+         << result.candidates << " simulations.\n\n";
+    } else {
+      md << "Simulations saved: " << result.surrogate_screened_out << " of the " << proposed
+         << " candidates the optimiser proposed in screened iterations were screened out (never simulated); "
+         << result.surrogate_screened << " pool points were ranked.\n\n";
+      md << "| iteration | training runs | pool | simulated | model error on the simulated (mean relative) |\n"
+            "| --- | --- | --- | --- | --- |\n";
+      for (const auto& it : result.surrogate_iterations) {
+        md << "| " << it.at("iteration").get<int>() + 1 << " | " << it.value("training_rows", 0L) << " | "
+           << it.at("pool").get<long>() << " | " << it.at("simulated").get<long>() << " | "
+           << (it.at("mean_relative_error").is_number() ? fmt(it.at("mean_relative_error").get<double>(), "%.3f")
+                                                        : std::string("n/a"))
+           << " |\n";
+      }
+      md << "\nScreened out (predicted fitness and probability of failure):\n\n"
+            "| iteration | slot | parameters | predicted fitness | P(failure) |\n| --- | --- | --- | --- | --- |\n";
+      const auto free = config.space.free_names();
+      for (const auto& it : result.surrogate_iterations)
+        for (const auto& c : it.at("candidates")) {
+          if (c.at("simulated").get<bool>()) continue;
+          md << "| " << it.at("iteration").get<int>() + 1 << " | " << c.at("slot").get<int>() << " | ";
+          const auto x = c.at("x").get<std::vector<double>>();
+          for (size_t k = 0; k < free.size() && k < x.size(); ++k)
+            md << (k ? ", " : "") << free[k] << " " << table_value(free[k], x[k]);
+          md << " | " << fmt(c.at("predicted_fitness").get<double>(), "%.1f") << " | "
+             << fmt(c.at("failure_probability").get<double>(), "%.2f") << " |\n";
+        }
+      md << "\n";
+    }
+  }
+
   const std::string path = (fs::path(out_dir) / "report.md").string();
   std::ofstream out(path);
   out << md.str();

@@ -476,3 +476,44 @@ TEST(Optimiser, MisuseOfAskTellAndStateIsRejected) {
   auto bobyqa = make_optimiser(space, with("nlopt:LN_BOBYQA", 100));
   EXPECT_THROW(bobyqa->tell({1.0}), std::logic_error);
 }
+
+// Pre-screening support: alternatives are redraws of the optimiser's own proposal that leave its
+// stream untouched, and a withdrawn candidate is never told a value nor counted.
+TEST(Optimiser, AlternativesAndWithdrawalForPrescreening) {
+  const TestFunction f = make_test_function("sphere", 3);
+  for (const char* algorithm : {"pso", "tbpso", "ga"}) {
+    auto plain = make_optimiser(space_of(f), with(algorithm, 60));
+    auto screened = make_optimiser(space_of(f), with(algorithm, 60));
+    for (int round = 0; round < 3; ++round) {
+      const auto a = plain->ask();
+      const auto b = screened->ask();
+      ASSERT_EQ(a.size(), b.size());
+      for (size_t i = 0; i < a.size(); ++i) EXPECT_TRUE(a[i] == b[i]) << algorithm << " alternatives moved the stream";
+      const auto alt = screened->alternatives(1, 4);
+      ASSERT_EQ(alt.size(), 4u);
+      EXPECT_TRUE(alt == screened->alternatives(1, 4)) << algorithm << ": alternatives are deterministic";
+      EXPECT_FALSE(alt[0] == alt[1]) << algorithm;
+      for (const auto& x : alt)
+        for (Eigen::Index k = 0; k < x.size(); ++k) EXPECT_TRUE(x[k] >= f.lower[k] && x[k] <= f.upper[k]);
+      std::vector<double> values;
+      for (const auto& x : a) values.push_back(f.evaluate(x));
+      plain->tell(values);
+      screened->tell(values);
+    }
+    // Withdrawing candidate 0: a finite value for it is refused, NaN is accepted and not counted.
+    const auto batch = screened->ask();
+    screened->withdraw(0);
+    std::vector<double> values;
+    for (const auto& x : batch) values.push_back(f.evaluate(x));
+    const long before = screened->evaluations();
+    EXPECT_THROW(screened->tell(values), std::invalid_argument) << algorithm;
+    values[0] = std::numeric_limits<double>::quiet_NaN();
+    screened->tell(values);
+    EXPECT_EQ(screened->evaluations(), before + static_cast<long>(batch.size()) - 1) << algorithm;
+    EXPECT_THROW(screened->withdraw(0), std::logic_error) << "no batch pending";
+  }
+  auto nlopt = make_optimiser(space_of(f), with("nlopt:LN_BOBYQA", 10));
+  nlopt->ask();
+  EXPECT_THROW(nlopt->alternatives(0, 2), std::logic_error);
+  EXPECT_THROW(nlopt->withdraw(0), std::logic_error);
+}

@@ -39,10 +39,24 @@
 //   candidate it chooses not to simulate (the optimiser does not distinguish predicted from
 //   simulated values), or (b) replace a candidate by another point with substitute(i, x), then
 //   evaluate that point: the optimiser then treats x as if it had proposed it (PSO/TBPSO: the
-//   particle's position becomes x, its velocity is kept; GA: the offspring's genes become x).
+//   particle's position becomes x, its velocity the move from its previous position to x; GA:
+//   the offspring's genes become x).
 //   After substitute(), ask() returns the modified batch. NLopt algorithms cannot accept a
 //   substitute (can_substitute() is false; substitute() throws std::logic_error) because NLopt
 //   chose the point itself and expects its value.
+// - alternatives(i, n) (where can_substitute()) returns n further proposals for candidate i, made
+//   the way the optimiser made the candidate (PSO/TBPSO: the particle's last move redrawn with
+//   fresh random coefficients; GA: further offspring of the same parents). They come from a
+//   generator seeded by (seed, iteration, i), never from the optimiser's own stream, so asking for
+//   them changes nothing the optimiser does afterwards. Substituting a PSO/TBPSO alternative also
+//   sets the particle's velocity to the move that reaches it (from where it was before the move).
+// - withdraw(i) marks candidate i of the pending batch as not evaluated: tell() ignores its value
+//   (pass NaN), it counts no evaluation and changes no memory (PSO/TBPSO: the particle goes back to
+//   where it was before the move, velocity included; GA: the offspring is discarded and weighs 0
+//   in the next selection). A screen that simulates k of n candidates withdraws the other n - k:
+//   the optimiser only ever learns simulated values. options.evaluations_per_iteration = k keeps
+//   the planned iteration count (and so the inertia / mutation schedules) consistent with the
+//   budget.
 #pragma once
 
 #include "demcal/optimise/parameter_space.hpp"
@@ -97,6 +111,9 @@ struct OptimiserOptions {
                                // PSO/TBPSO/GA plan ceil(max_evaluations / population) iterations
                                // (that count drives the inertia schedule) and cut the last batch.
   std::uint64_t seed = 1;      // the only source of randomness
+  int evaluations_per_iteration = 0;  // PSO/TBPSO/GA: candidates evaluated per iteration when an
+                               // outside screen withdraws the rest (0 = population); sets the
+                               // planned iterations ceil(budget / this)
   double target_value = -std::numeric_limits<double>::infinity();  // done() once best <= this
 
   // PSO / TBPSO (eqs. 1-15). Velocities are in unit-cube lengths per iteration.
@@ -185,6 +202,11 @@ class Optimiser {
   // Outside pre-screening (see the header comment).
   virtual bool can_substitute() const { return false; }
   virtual void substitute(std::size_t index, const Eigen::VectorXd& physical);
+  // Further proposals (physical) for candidate `index` of the pending batch; throws
+  // std::logic_error where can_substitute() is false or no batch is pending.
+  virtual std::vector<Eigen::VectorXd> alternatives(std::size_t index, int count) const;
+  // Candidate `index` of the pending batch will not be evaluated (see the header comment).
+  virtual void withdraw(std::size_t index);
 
   // Best point told so far (physical) and its value; empty vector and +inf before any finite value.
   Eigen::VectorXd best_x() const;

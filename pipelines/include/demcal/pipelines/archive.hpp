@@ -116,6 +116,15 @@ struct EvaluationRecord {
   double fitness = std::numeric_limits<double>::quiet_NaN();
 };
 
+// A finished run with its fitness against one objective key, without the curves (surrogate
+// training data: pipelines/surrogate_data.hpp).
+struct RunFitness {
+  std::int64_t run_id = 0;
+  std::map<std::string, double> params;       // bit-identical (from the parameter key)
+  std::string status;                          // engine status or "failed"
+  double fitness = std::numeric_limits<double>::quiet_NaN();  // NaN: the run failed
+};
+
 class RunArchive {
  public:
   // Opens (creating if needed) the archive file and its tables; WAL journal. Throws ArchiveError
@@ -139,6 +148,20 @@ class RunArchive {
   std::string integrity_check() const;
   // Every run with this status ("failed", "unstable", ...), in id order, without curves.
   std::vector<RunRecord> runs_with_status(const std::string& status) const;
+  // Largest run id (0 for an empty archive): a campaign's horizon of earlier runs.
+  std::int64_t max_run_id() const;
+  // Every run of a model (scene hash) with a fitness row for objective_key and id <= max_run_id,
+  // in id order. Runs without that fitness row (not yet scored) are left out.
+  std::vector<RunFitness> run_fitness(const std::string& model_hash, const std::string& objective_key,
+                                      std::int64_t max_run_id = INT64_MAX) const;
+  // (model hash, objective key, rows) for every pair with fitness rows, most rows first.
+  struct ModelObjective {
+    std::string model_hash, objective_key;
+    std::int64_t rows = 0;
+  };
+  std::vector<ModelObjective> model_objectives() const;
+  // Every campaign, oldest first.
+  std::vector<CampaignRecord> campaigns() const;
 
   // Fitness rows (one per run and objective key); put replaces.
   void put_fitness(const FitnessRecord& fitness);

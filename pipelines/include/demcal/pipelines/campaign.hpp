@@ -37,6 +37,7 @@
 #include "demcal/smoothing/curve.hpp"
 #include "demcal/smoothing/objective.hpp"
 #include "demcal/smoothing/smoother.hpp"
+#include "demcal/surrogate/surrogate.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -105,6 +106,21 @@ struct PolishSpec {
   optimise::PolishOptions options;     // initial_step in unit-cube lengths of the parameter space
 };
 
+// Surrogate pre-screening (campaign key "surrogate", flag --surrogate on|off|MODEL; docs/surrogate.md).
+// With it, PSO/TBPSO/GA iterations rank a pool of pool_factor x population candidates with a model
+// trained on every finished run of the same scene and objective in the archive (earlier campaigns'
+// included) and simulate only the best k (0 = population); the optimiser is told simulated values
+// only. Algorithm "bo" (Bayesian optimisation) uses the same options. The budget that counts is
+// optimiser.max_evaluations (--max-simulations): simulations, not proposals.
+//   "surrogate": {"pool_factor": 5, "k": 5, "acquisition": "ei", "min_runs": 10, "model": "m.json",
+//                 "gp": {"restarts": 6, "log_transform": "auto", ...}}
+struct SurrogateSpec {
+  bool enabled = false;
+  surrogate::SurrogateOptions options;
+  std::string model_file;              // a trained model (demcal surrogate train): its hyperparameters
+                                       // are kept and only conditioned on the archive's rows
+};
+
 struct CampaignConfig {
   std::string name = "campaign";
   std::string source = "campaign";     // where it came from, for messages
@@ -119,6 +135,7 @@ struct CampaignConfig {
   std::string archive;                 // "" = <output>/archive.sqlite
   bool report = true;                  // write report.md and figures
   PolishSpec polish;                   // off unless the campaign has a "polish" object
+  SurrogateSpec surrogate;             // off unless the campaign has a "surrogate" object
   // Identifiability band (campaign key "identifiability": {"relative_band": r}): parameter sets
   // whose fitness is within best x (1 + r) are reported as indistinguishable from the best.
   // 0 = 1/sqrt(2 x objective points) (0.05 for 200 points): the relative spread of a fitness value
@@ -208,6 +225,17 @@ struct CampaignResult {
   double swarm_best_fitness = std::numeric_limits<double>::quiet_NaN();  // before the polish
   std::string polish_status;
   Identifiability identifiability;
+  // Surrogate (with pre-screening or "bo"): model kind, pool points ranked, candidates simulated
+  // under the screen, candidates screened out (proposed by the optimiser, never simulated), the
+  // final model's leave-one-out relative error, and one record per screened iteration (pool,
+  // the model's error on the simulated candidates, each candidate's prediction and fate).
+  bool surrogate_used = false;
+  std::string surrogate_kind;
+  long surrogate_screened = 0;
+  long surrogate_simulated = 0;
+  long surrogate_screened_out = 0;
+  double surrogate_cv_error = std::numeric_limits<double>::quiet_NaN();
+  nlohmann::json surrogate_iterations = nlohmann::json::array();
   nlohmann::json to_json() const;            // the result.json layout
 };
 

@@ -1,0 +1,185 @@
+// Surrogate pre-screening of optimiser candidates: a model of the fitness over the optimiser's unit
+// cube, trained on archived runs, that ranks candidates before the expensive simulations.
+//
+// The module knows nothing of SQLite or the engine: it takes plain rows (a unit-cube point and the
+// fitness, NaN for a failed run) and an optimise::Optimiser. pipelines/ reads the archive into rows
+// (archive_training_rows) and runs the simulations.
+//
+// Pieces
+// - SurrogateModel: a GaussianProcess on the finite fitness values plus a FailureClassifier trained
+//   on all rows (failed = non-finite fitness: unstable runs, no common window with the measurement,
+//   a crashed external program). Both are deterministic functions of the rows and the options.
+// - Acquisition: expected improvement (EI, default) or a lower confidence bound (LCB), both in the
+//   GP's model space (log fitness when the log transform was chosen), multiplied (EI) or penalised
+//   (LCB) by the predicted probability of failure.
+// - prescreen(): one iteration of pre-screening inside the ask/tell loop: for each candidate of the
+//   pending batch, pool_factor - 1 alternatives (Optimiser::alternatives) join it in a pool; each
+//   candidate slot is replaced (substitute) by the best of its pool under the acquisition; the k
+//   slots with the best acquisition are kept and the others withdrawn (Optimiser::withdraw). The
+//   optimiser is then told simulated values for the kept slots and NaN for the withdrawn ones: it
+//   never receives a prediction.
+// - BayesOptimiser ("bo"): a pure surrogate-driven search behind the same ask/tell interface: an
+//   initial Latin-hypercube design, then one candidate per iteration, the acquisition's optimum under
+//   the GP refitted on every told value (plus any warm rows from earlier campaigns).
+// - cross_validate(): k-fold held-out error and the coverage of the 90 % predictive intervals.
+#pragma once
+
+#include "demcal/optimise/optimiser.hpp"
+#include "demcal/surrogate/gaussian_process.hpp"
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace demcal::surrogate {
+
+// One training row: a point of the unit cube of the campaign's parameter space and its fitness
+// (NaN or inf = a failed run).
+struct TrainingRow {
+  Eigen::VectorXd unit;
+  double fitness = std::numeric_limits<double>::quiet_NaN();
+};
+
+// Probability that a run at a point fails: a Nadaraya-Watson kernel estimate with a Gaussian kernel
+// in the unit cube and a prior of `prior_weight` pseudo-runs at the overall failure rate,
+//   p(x) = (Σ w_i f_i + a p̄) / (Σ w_i + a),  w_i = exp(−|x − x_i|² / (2 h²)).
+// The bandwidth h is chosen from a fixed grid by the leave-one-out log-likelihood of the labels.
+// Without any failed run p(x) = 0 everywhere.
+class FailureClassifier {
+ public:
+  void fit(const std::vector<TrainingRow>& rows);
+  double probability(const Eigen::VectorXd& unit) const;
+  double bandwidth() const { return bandwidth_; }
+  long failures() const { return failures_; }
+  long points() const { return static_cast<long>(X_.rows()); }
+  nlohmann::json to_json() const;
+  static FailureClassifier from_json(const nlohmann::json& json, const std::string& where);
+
+ private:
+  Eigen::MatrixXd X_;
+  Eigen::VectorXd failed_;     // 1 = failed, 0 = finite fitness
+  double bandwidth_ = 0.1;
+  double prior_weight_ = 1.0;
+  double rate_ = 0.0;
+  long failures_ = 0;
+};
+
+enum class Acquisition { expected_improvement, lower_confidence_bound };
+std::string to_string(Acquisition acquisition);
+Acquisition parse_acquisition(const std::string& text);  // "ei" | "lcb"
+
+// Campaign key "surrogate" (docs/surrogate.md).
+struct SurrogateOptions {
+  std::string kind = "gp";           // the model kind ("gp")
+  int pool_factor = 5;               // pool = pool_factor x batch (the candidate and pool_factor - 1
+                                     // alternatives per slot), >= 1
+  int k = 0;                         // candidates simulated per iteration; 0 = the whole batch
+  Acquisition acquisition = Acquisition::expected_improvement;
+  double lcb_kappa = 2.0;            // LCB = mean − kappa sd (model space)
+  int min_runs = 10;                 // finished runs needed before the screen switches on (and the
+                                     // initial design of "bo"), >= 3
+  int max_training_runs = 400;       // at most this many rows (select_training_rows), >= 10
+  GpOptions gp;
+  // Throws std::invalid_argument naming the option and value.
+  void Validate() const;
+  nlohmann::json to_json() const;
+  static SurrogateOptions from_json(const nlohmann::json& json, const std::string& where);
+};
+
+// The rows a model trains on: all of them when there are at most max_rows; else the max_rows / 2
+// best finite rows plus an evenly spaced selection (in the given order) of the rest, so the model
+// keeps both the basin and a global view. Deterministic.
+std::vector<TrainingRow> select_training_rows(const std::vector<TrainingRow>& rows, int max_rows);
+
+struct Prediction {
+  double mean = 0;          // model space (fitness or log fitness)
+  double sd = 0;            // latent sd, model space
+  double fitness = 0;       // back-transformed mean (the median predicted fitness)
+  double failure_probability = 0;
+};
+
+class SurrogateModel {
+ public:
+  SurrogateModel() = default;
+  explicit SurrogateModel(SurrogateOptions options) : options_(std::move(options)) {}
+
+  // Trains the GP (finite rows) and the classifier (all rows). Returns false (and stays unusable)
+  // with fewer than 3 finite rows.
+  bool fit(const std::vector<TrainingRow>& rows);
+  // Keeps the hyperparameters of a trained model and conditions on these rows instead.
+  bool condition(const std::vector<TrainingRow>& rows);
+  bool usable() const { return gp_.fitted(); }
+
+  Prediction predict(const Eigen::VectorXd& unit) const;
+  // The acquisition's score (larger = more worth simulating).
+  double score(const Prediction& p) const;
+  double score(const Eigen::VectorXd& unit) const { return score(predict(unit)); }
+
+  const GaussianProcess& gp() const { return gp_; }
+  const FailureClassifier& classifier() const { return classifier_; }
+  const SurrogateOptions& options() const { return options_; }
+  long training_rows() const { return rows_; }
+
+  nlohmann::json to_json() const;   // a model file (demcal surrogate train)
+  static SurrogateModel from_json(const nlohmann::json& json, const std::string& where);
+
+ private:
+  SurrogateOptions options_;
+  GaussianProcess gp_;
+  FailureClassifier classifier_;
+  double incumbent_ = 0;            // best finite model-space target (EI)
+  double spread_ = 1;               // range of model-space targets (LCB failure penalty)
+  long rows_ = 0;
+};
+
+// One iteration of pre-screening: what was ranked and what was kept.
+struct ScreenedCandidate {
+  Eigen::VectorXd physical;         // the slot's chosen point (physical units)
+  int slot = 0;                     // index in the optimiser's batch
+  int pool = 0;                     // points ranked for this slot
+  bool replaced = false;            // an alternative beat the optimiser's own proposal
+  bool simulated = false;           // kept (true) or withdrawn (false)
+  Prediction prediction;
+  double score = 0;
+};
+struct ScreenReport {
+  int pool = 0;                     // points ranked in total
+  int simulated = 0;                // slots kept
+  std::vector<ScreenedCandidate> candidates;  // one per slot of the batch
+  nlohmann::json to_json() const;
+};
+
+// Screens the optimiser's pending batch (ask() must have been called, can_substitute() true).
+ScreenReport prescreen(optimise::Optimiser& optimiser, const SurrogateModel& model, const SurrogateOptions& options);
+
+// Held-out check of a model kind on rows: `folds`-fold cross-validation (rows assigned to folds
+// round-robin in the given order), each fold predicted by a model fitted to the others.
+struct CrossValidation {
+  long rows = 0, finite_rows = 0, failed_rows = 0;
+  int folds = 0;
+  double mean_absolute_error = 0;   // fitness units, held-out finite rows
+  double relative_error = 0;        // mean |ŷ − y| / mean |y − mean(y)|
+  double median_relative_error = 0; // median of |ŷ − y| / |y|
+  double coverage90 = 0;            // fraction of held-out finite rows inside the 90 % interval
+  double failure_brier = 0;         // mean (p − failed)² over all held-out rows
+  nlohmann::json to_json() const;
+};
+CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const SurrogateOptions& options, int folds = 5);
+
+// "bo": Bayesian optimisation behind the ask/tell interface (see the header comment). The initial
+// design has max(options.min_runs, population) points minus the warm rows inside the space
+// (at least 2 unless the warm rows already make a usable model); then one point per iteration: the
+// acquisition's maximum over 2000 random points and 20 alternatives around each of the 5 best
+// training points, polished by NLopt LN_BOBYQA from the best 3. Deterministic; save_state() holds
+// the told history, so load_state() refits and continues exactly.
+std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
+                                                          const optimise::OptimiserOptions& options,
+                                                          const SurrogateOptions& surrogate,
+                                                          std::vector<TrainingRow> warm_rows = {});
+
+}  // namespace demcal::surrogate

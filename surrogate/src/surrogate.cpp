@@ -1,0 +1,598 @@
+#include "demcal/surrogate/surrogate.hpp"
+
+#include <nlopt.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+
+namespace demcal::surrogate {
+
+namespace {
+
+double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
+
+std::uint64_t mix(std::uint64_t z) {
+  z += 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+std::string fmt(double v) {
+  std::ostringstream out;
+  out.precision(17);
+  out << v;
+  return out.str();
+}
+
+nlohmann::json vector_json(const Eigen::VectorXd& v) {
+  nlohmann::json a = nlohmann::json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) a.push_back(v[i]);
+  return a;
+}
+
+Eigen::VectorXd vector_from(const nlohmann::json& j) {
+  const auto v = j.get<std::vector<double>>();
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+}
+
+void split_rows(const std::vector<TrainingRow>& rows, Eigen::MatrixXd& X, Eigen::VectorXd& y) {
+  long finite = 0;
+  for (const auto& r : rows) finite += std::isfinite(r.fitness) ? 1 : 0;
+  const Eigen::Index d = rows.empty() ? 0 : rows.front().unit.size();
+  X.resize(finite, d);
+  y.resize(finite);
+  Eigen::Index i = 0;
+  for (const auto& r : rows)
+    if (std::isfinite(r.fitness)) {
+      X.row(i) = r.unit.transpose();
+      y[i++] = r.fitness;
+    }
+}
+
+}  // namespace
+
+// ---- failure classifier ------------------------------------------------------------------------
+
+void FailureClassifier::fit(const std::vector<TrainingRow>& rows) {
+  const auto n = static_cast<Eigen::Index>(rows.size());
+  const Eigen::Index d = rows.empty() ? 0 : rows.front().unit.size();
+  X_.resize(n, d);
+  failed_.resize(n);
+  failures_ = 0;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    X_.row(i) = rows[static_cast<size_t>(i)].unit.transpose();
+    failed_[i] = std::isfinite(rows[static_cast<size_t>(i)].fitness) ? 0.0 : 1.0;
+    failures_ += failed_[i] > 0 ? 1 : 0;
+  }
+  rate_ = n > 0 ? static_cast<double>(failures_) / static_cast<double>(n) : 0.0;
+  if (failures_ == 0 || failures_ == n) return;
+  Eigen::MatrixXd sq(n, n);
+  for (Eigen::Index a = 0; a < n; ++a)
+    for (Eigen::Index b = 0; b < n; ++b) sq(a, b) = (X_.row(a) - X_.row(b)).squaredNorm();
+  double best_ll = -HUGE_VAL;
+  for (double h : {0.03, 0.05, 0.08, 0.12, 0.2, 0.3, 0.5}) {
+    double ll = 0;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      double num = prior_weight_ * rate_, den = prior_weight_;
+      for (Eigen::Index j = 0; j < n; ++j) {
+        if (j == i) continue;
+        const double w = std::exp(-sq(i, j) / (2 * h * h));
+        num += w * failed_[j];
+        den += w;
+      }
+      const double p = std::clamp(num / den, 1e-6, 1 - 1e-6);
+      ll += failed_[i] > 0 ? std::log(p) : std::log(1 - p);
+    }
+    if (ll > best_ll) {
+      best_ll = ll;
+      bandwidth_ = h;
+    }
+  }
+}
+
+double FailureClassifier::probability(const Eigen::VectorXd& x) const {
+  if (failures_ == 0) return 0.0;
+  double num = prior_weight_ * rate_, den = prior_weight_;
+  for (Eigen::Index j = 0; j < X_.rows(); ++j) {
+    const double w = std::exp(-(X_.row(j).transpose() - x).squaredNorm() / (2 * bandwidth_ * bandwidth_));
+    num += w * failed_[j];
+    den += w;
+  }
+  return num / den;
+}
+
+nlohmann::json FailureClassifier::to_json() const {
+  nlohmann::json X = nlohmann::json::array();
+  for (Eigen::Index i = 0; i < X_.rows(); ++i) X.push_back(vector_json(X_.row(i).transpose()));
+  return {{"bandwidth", bandwidth_}, {"prior_weight", prior_weight_}, {"X", X}, {"failed", vector_json(failed_)}};
+}
+
+FailureClassifier FailureClassifier::from_json(const nlohmann::json& j, const std::string& where) {
+  try {
+    FailureClassifier c;
+    std::vector<TrainingRow> rows;
+    const auto failed = j.at("failed").get<std::vector<double>>();
+    const auto& X = j.at("X");
+    if (X.size() != failed.size()) throw std::invalid_argument("X and failed have different lengths");
+    for (size_t i = 0; i < failed.size(); ++i)
+      rows.push_back({vector_from(X[i]), failed[i] > 0 ? std::numeric_limits<double>::quiet_NaN() : 0.0});
+    c.fit(rows);
+    c.bandwidth_ = j.at("bandwidth").get<double>();
+    if (!(c.bandwidth_ > 0)) throw std::invalid_argument("bandwidth must be > 0");
+    return c;
+  } catch (const std::exception& e) {
+    throw std::invalid_argument(where + ": " + e.what());
+  }
+}
+
+// ---- options ---------------------------------------------------------------------------------------
+
+std::string to_string(Acquisition a) { return a == Acquisition::expected_improvement ? "ei" : "lcb"; }
+
+Acquisition parse_acquisition(const std::string& text) {
+  if (text == "ei") return Acquisition::expected_improvement;
+  if (text == "lcb") return Acquisition::lower_confidence_bound;
+  throw std::invalid_argument("acquisition = '" + text + "' (expected ei or lcb)");
+}
+
+void SurrogateOptions::Validate() const {
+  if (kind != "gp") throw std::invalid_argument("surrogate kind = '" + kind + "' (expected gp)");
+  if (pool_factor < 1) throw std::invalid_argument("surrogate pool_factor = " + std::to_string(pool_factor) + " must be >= 1");
+  if (k < 0) throw std::invalid_argument("surrogate k = " + std::to_string(k) + " must be >= 0 (0 = the whole batch)");
+  if (!(lcb_kappa >= 0) || !std::isfinite(lcb_kappa))
+    throw std::invalid_argument("surrogate lcb_kappa = " + fmt(lcb_kappa) + " must be finite and >= 0");
+  if (min_runs < 3) throw std::invalid_argument("surrogate min_runs = " + std::to_string(min_runs) + " must be >= 3");
+  if (max_training_runs < 10)
+    throw std::invalid_argument("surrogate max_training_runs = " + std::to_string(max_training_runs) + " must be >= 10");
+  gp.Validate();
+}
+
+nlohmann::json SurrogateOptions::to_json() const {
+  return {{"kind", kind},         {"pool_factor", pool_factor}, {"k", k},
+          {"acquisition", to_string(acquisition)}, {"lcb_kappa", lcb_kappa}, {"min_runs", min_runs},
+          {"max_training_runs", max_training_runs}, {"gp", gp.to_json()}};
+}
+
+SurrogateOptions SurrogateOptions::from_json(const nlohmann::json& j, const std::string& where) {
+  if (!j.is_object()) throw std::invalid_argument(where + ": must be an object");
+  SurrogateOptions o;
+  for (const auto& [key, value] : j.items()) {
+    try {
+      if (key == "kind") o.kind = value.get<std::string>();
+      else if (key == "pool_factor") o.pool_factor = value.get<int>();
+      else if (key == "k") o.k = value.get<int>();
+      else if (key == "acquisition") o.acquisition = parse_acquisition(value.get<std::string>());
+      else if (key == "lcb_kappa") o.lcb_kappa = value.get<double>();
+      else if (key == "min_runs") o.min_runs = value.get<int>();
+      else if (key == "max_training_runs") o.max_training_runs = value.get<int>();
+      else if (key == "gp") o.gp = GpOptions::from_json(value, where + ".gp");
+      else throw std::invalid_argument("unknown key");
+    } catch (const std::exception& e) {
+      throw std::invalid_argument(where + "." + key + " = " + value.dump() + ": " + e.what());
+    }
+  }
+  try {
+    o.Validate();
+  } catch (const std::exception& e) {
+    throw std::invalid_argument(where + ": " + e.what());
+  }
+  return o;
+}
+
+std::vector<TrainingRow> select_training_rows(const std::vector<TrainingRow>& rows, int max_rows) {
+  if (static_cast<long>(rows.size()) <= max_rows) return rows;
+  std::vector<size_t> order(rows.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    const double fa = std::isfinite(rows[a].fitness) ? rows[a].fitness : HUGE_VAL;
+    const double fb = std::isfinite(rows[b].fitness) ? rows[b].fitness : HUGE_VAL;
+    return fa < fb;
+  });
+  const size_t best = static_cast<size_t>(max_rows / 2);
+  std::vector<bool> take(rows.size(), false);
+  for (size_t i = 0; i < best; ++i) take[order[i]] = true;
+  std::vector<size_t> rest;
+  for (size_t i = 0; i < rows.size(); ++i)
+    if (!take[i]) rest.push_back(i);
+  const size_t wanted = static_cast<size_t>(max_rows) - best;
+  for (size_t j = 0; j < wanted; ++j) take[rest[j * rest.size() / wanted]] = true;
+  std::vector<TrainingRow> out;
+  for (size_t i = 0; i < rows.size(); ++i)
+    if (take[i]) out.push_back(rows[i]);
+  return out;
+}
+
+// ---- model -----------------------------------------------------------------------------------
+
+bool SurrogateModel::fit(const std::vector<TrainingRow>& all_rows) {
+  options_.Validate();
+  const auto rows = select_training_rows(all_rows, options_.max_training_runs);
+  Eigen::MatrixXd X;
+  Eigen::VectorXd y;
+  split_rows(rows, X, y);
+  gp_ = GaussianProcess(options_.gp);
+  rows_ = static_cast<long>(rows.size());
+  if (y.size() < 3 || gp_.fit(X, y) != GpStatus::fitted) return false;
+  classifier_.fit(rows);
+  return condition(all_rows);
+}
+
+bool SurrogateModel::condition(const std::vector<TrainingRow>& all_rows) {
+  if (gp_.length_scales().size() == 0) return false;
+  const auto rows = select_training_rows(all_rows, options_.max_training_runs);
+  Eigen::MatrixXd X;
+  Eigen::VectorXd y;
+  split_rows(rows, X, y);
+  if (y.size() < 1) return false;
+  if (X.cols() != gp_.length_scales().size())
+    throw std::invalid_argument("surrogate model: rows have " + std::to_string(X.cols()) + " coordinates, the model " +
+                                std::to_string(gp_.length_scales().size()));
+  gp_.condition(X, y);
+  classifier_.fit(rows);
+  rows_ = static_cast<long>(rows.size());
+  // Incumbent of EI: the smallest posterior mean at a training point (robust to the noise).
+  incumbent_ = HUGE_VAL;
+  double lo = HUGE_VAL, hi = -HUGE_VAL;
+  for (Eigen::Index i = 0; i < X.rows(); ++i) {
+    incumbent_ = std::min(incumbent_, gp_.predict(X.row(i).transpose()).mean);
+    lo = std::min(lo, gp_.to_model(y[i]));
+    hi = std::max(hi, gp_.to_model(y[i]));
+  }
+  spread_ = hi > lo ? hi - lo : 1.0;
+  return gp_.fitted();
+}
+
+Prediction SurrogateModel::predict(const Eigen::VectorXd& unit) const {
+  const GpPrediction g = gp_.predict(unit);
+  Prediction p;
+  p.mean = g.mean;
+  p.sd = g.sd;
+  p.fitness = gp_.from_model(g.mean);
+  p.failure_probability = classifier_.probability(unit);
+  return p;
+}
+
+double SurrogateModel::score(const Prediction& p) const {
+  if (options_.acquisition == Acquisition::lower_confidence_bound)
+    return -(p.mean - options_.lcb_kappa * p.sd) - p.failure_probability * spread_;
+  const double gain = incumbent_ - p.mean;
+  double ei = std::max(gain, 0.0);
+  if (p.sd > 1e-12) {
+    const double u = gain / p.sd;
+    ei = gain * normal_cdf(u) + p.sd * normal_pdf(u);
+  }
+  return ei * (1.0 - p.failure_probability);
+}
+
+nlohmann::json SurrogateModel::to_json() const {
+  return {{"format", "demcal-surrogate"}, {"version", 1},          {"kind", options_.kind},
+          {"options", options_.to_json()}, {"gp", gp_.to_json()}, {"classifier", classifier_.to_json()}};
+}
+
+SurrogateModel SurrogateModel::from_json(const nlohmann::json& j, const std::string& where) {
+  try {
+    if (j.at("format") != "demcal-surrogate") throw std::invalid_argument("not a demcal surrogate model file");
+    SurrogateModel m(SurrogateOptions::from_json(j.at("options"), where + ": options"));
+    m.gp_ = GaussianProcess::from_json(j.at("gp"), where + ": gp");
+    std::vector<TrainingRow> rows;
+    const auto& X = j.at("gp").at("X");
+    const auto y = j.at("gp").at("y").get<std::vector<double>>();
+    for (size_t i = 0; i < y.size(); ++i) rows.push_back({vector_from(X[i]), y[i]});
+    m.condition(rows);
+    m.classifier_ = FailureClassifier::from_json(j.at("classifier"), where + ": classifier");
+    return m;
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(where + ": " + e.what());
+  }
+}
+
+// ---- pre-screening -----------------------------------------------------------------------------
+
+nlohmann::json ScreenReport::to_json() const {
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& c : candidates)
+    list.push_back({{"slot", c.slot},
+                    {"x", vector_json(c.physical)},
+                    {"pool", c.pool},
+                    {"replaced", c.replaced},
+                    {"simulated", c.simulated},
+                    {"predicted_fitness", c.prediction.fitness},
+                    {"predicted_mean", c.prediction.mean},
+                    {"predicted_sd", c.prediction.sd},
+                    {"failure_probability", c.prediction.failure_probability},
+                    {"score", c.score}});
+  return {{"pool", pool}, {"simulated", simulated}, {"candidates", list}};
+}
+
+ScreenReport prescreen(optimise::Optimiser& optimiser, const SurrogateModel& model, const SurrogateOptions& options) {
+  if (!optimiser.can_substitute()) throw std::logic_error(optimiser.name() + ": cannot be pre-screened");
+  if (!model.usable()) throw std::logic_error("prescreen: the surrogate model is not fitted");
+  const auto batch = optimiser.ask();
+  const auto& space = optimiser.space();
+  ScreenReport report;
+  for (size_t i = 0; i < batch.size(); ++i) {
+    std::vector<Eigen::VectorXd> pool = {batch[i]};
+    if (options.pool_factor > 1) {
+      auto alternatives = optimiser.alternatives(i, options.pool_factor - 1);
+      pool.insert(pool.end(), alternatives.begin(), alternatives.end());
+    }
+    ScreenedCandidate best;
+    best.slot = static_cast<int>(i);
+    best.pool = static_cast<int>(pool.size());
+    best.score = -HUGE_VAL;
+    for (size_t j = 0; j < pool.size(); ++j) {
+      const Prediction p = model.predict(space.to_unit(pool[j]));
+      const double s = model.score(p);
+      if (s > best.score) {  // ties keep the optimiser's own proposal
+        best.score = s;
+        best.prediction = p;
+        best.physical = pool[j];
+        best.replaced = j > 0;
+      }
+    }
+    if (best.replaced) optimiser.substitute(i, best.physical);
+    report.pool += best.pool;
+    report.candidates.push_back(best);
+  }
+  const size_t keep = options.k > 0 ? std::min(batch.size(), static_cast<size_t>(options.k)) : batch.size();
+  std::vector<size_t> order(batch.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return report.candidates[a].score > report.candidates[b].score; });
+  for (size_t r = 0; r < order.size(); ++r) {
+    auto& c = report.candidates[order[r]];
+    c.simulated = r < keep;
+    if (!c.simulated) optimiser.withdraw(order[r]);
+  }
+  report.simulated = static_cast<int>(keep);
+  return report;
+}
+
+// ---- cross-validation ----------------------------------------------------------------------------
+
+nlohmann::json CrossValidation::to_json() const {
+  return {{"rows", rows},
+          {"finite_rows", finite_rows},
+          {"failed_rows", failed_rows},
+          {"folds", folds},
+          {"mean_absolute_error", mean_absolute_error},
+          {"relative_error", relative_error},
+          {"median_relative_error", median_relative_error},
+          {"coverage90", coverage90},
+          {"failure_brier", failure_brier}};
+}
+
+CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const SurrogateOptions& options, int folds) {
+  if (folds < 2) throw std::invalid_argument("cross_validate: folds = " + std::to_string(folds) + " must be >= 2");
+  CrossValidation cv;
+  cv.rows = static_cast<long>(rows.size());
+  cv.folds = folds;
+  std::vector<double> abs_errors, rel_errors, ys;
+  long covered = 0;
+  double brier = 0;
+  for (int f = 0; f < folds; ++f) {
+    std::vector<TrainingRow> train, test;
+    for (size_t i = 0; i < rows.size(); ++i) (static_cast<int>(i % static_cast<size_t>(folds)) == f ? test : train).push_back(rows[i]);
+    SurrogateModel model(options);
+    if (test.empty() || !model.fit(train)) continue;
+    for (const auto& r : test) {
+      const Prediction p = model.predict(r.unit);
+      const bool failed = !std::isfinite(r.fitness);
+      brier += (p.failure_probability - (failed ? 1.0 : 0.0)) * (p.failure_probability - (failed ? 1.0 : 0.0));
+      if (failed) {
+        ++cv.failed_rows;
+        continue;
+      }
+      ++cv.finite_rows;
+      abs_errors.push_back(std::abs(p.fitness - r.fitness));
+      if (r.fitness != 0) rel_errors.push_back(std::abs(p.fitness - r.fitness) / std::abs(r.fitness));
+      ys.push_back(r.fitness);
+      const auto [lo, hi] = model.gp().interval(r.unit, 0.9);
+      if (r.fitness >= lo && r.fitness <= hi) ++covered;
+    }
+  }
+  if (cv.finite_rows == 0) return cv;
+  const double mean_y = std::accumulate(ys.begin(), ys.end(), 0.0) / static_cast<double>(ys.size());
+  double spread = 0;
+  for (double y : ys) spread += std::abs(y - mean_y);
+  const double total = std::accumulate(abs_errors.begin(), abs_errors.end(), 0.0);
+  cv.mean_absolute_error = total / static_cast<double>(abs_errors.size());
+  cv.relative_error = spread > 0 ? total / spread : 0.0;
+  if (!rel_errors.empty()) {
+    std::nth_element(rel_errors.begin(), rel_errors.begin() + static_cast<long>(rel_errors.size() / 2), rel_errors.end());
+    cv.median_relative_error = rel_errors[rel_errors.size() / 2];
+  }
+  cv.coverage90 = static_cast<double>(covered) / static_cast<double>(cv.finite_rows);
+  cv.failure_brier = brier / static_cast<double>(cv.finite_rows + cv.failed_rows);
+  return cv;
+}
+
+// ---- Bayesian optimisation -------------------------------------------------------------------------
+
+namespace {
+
+double negative_score(unsigned n, const double* x, double*, void* data) {
+  const auto* model = static_cast<const SurrogateModel*>(data);
+  return -model->score(Eigen::Map<const Eigen::VectorXd>(x, n));
+}
+
+class BayesOptimiser final : public optimise::Optimiser {
+ public:
+  BayesOptimiser(const optimise::ParameterSpace& space, const optimise::OptimiserOptions& options,
+                 SurrogateOptions surrogate, std::vector<TrainingRow> warm)
+      : Optimiser(space, options, "bo"), surrogate_(std::move(surrogate)), warm_(std::move(warm)) {
+    surrogate_.Validate();
+    const int d = space.dimension();
+    for (const auto& r : warm_)
+      if (r.unit.size() != d) throw std::invalid_argument("bo: a warm row has the wrong dimension");
+    long warm_finite = 0;
+    for (const auto& r : warm_) warm_finite += std::isfinite(r.fitness) ? 1 : 0;
+    const long wanted = std::max<long>(surrogate_.min_runs, options.population);
+    const long design = std::max<long>(warm_finite >= surrogate_.min_runs ? 0 : 2, wanted - warm_finite);
+    // Latin hypercube: one point per stratum of every coordinate, strata permuted per coordinate.
+    std::mt19937_64 rng(mix(options.seed));
+    design_ = Eigen::MatrixXd(design, d);
+    for (int k = 0; k < d; ++k) {
+      std::vector<long> perm(static_cast<size_t>(design));
+      std::iota(perm.begin(), perm.end(), 0);
+      for (long i = design - 1; i > 0; --i) std::swap(perm[static_cast<size_t>(i)], perm[static_cast<size_t>(rng() % static_cast<std::uint64_t>(i + 1))]);
+      for (long i = 0; i < design; ++i)
+        design_(i, k) = (static_cast<double>(perm[static_cast<size_t>(i)]) + uniform01(rng)) / static_cast<double>(design);
+    }
+  }
+
+  std::vector<Eigen::VectorXd> ask() override {
+    if (!pending_) {
+      if (done()) return {};
+      const long remaining = options_.evaluation_budget() - evaluations_;
+      pending_units_.clear();
+      const long told = static_cast<long>(told_f_.size());
+      if (told < design_.rows()) {
+        for (long i = told; i < design_.rows() && static_cast<long>(pending_units_.size()) < remaining; ++i)
+          pending_units_.push_back(design_.row(i).transpose());
+      } else {
+        pending_units_.push_back(propose());
+      }
+      pending_ = true;
+    }
+    std::vector<Eigen::VectorXd> batch;
+    for (const auto& u : pending_units_) batch.push_back(physical(u));
+    return batch;
+  }
+
+  void tell(const std::vector<double>& fitness) override {
+    if (!pending_) throw std::logic_error("bo: tell() without a pending ask()");
+    if (fitness.size() != pending_units_.size())
+      throw std::invalid_argument("bo: tell() got " + std::to_string(fitness.size()) + " values for " +
+                                  std::to_string(pending_units_.size()) + " candidates");
+    for (size_t i = 0; i < fitness.size(); ++i) {
+      record(pending_units_[i], fitness[i]);
+      told_x_.push_back(pending_units_[i]);
+      told_f_.push_back(fitness[i]);
+    }
+    pending_ = false;
+    ++iteration_;
+    update_status_after_tell();
+  }
+
+  nlohmann::json save_state() const override {
+    nlohmann::json s = save_common();
+    nlohmann::json x = nlohmann::json::array(), f = nlohmann::json::array(), pending = nlohmann::json::array();
+    for (const auto& u : told_x_) x.push_back(vector_json(u));
+    for (double v : told_f_) f.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr));
+    for (const auto& u : pending_units_) pending.push_back(vector_json(u));
+    s["told_x"] = x;
+    s["told_f"] = f;
+    s["pending"] = pending_;
+    s["pending_units"] = pending;
+    return s;
+  }
+
+  void load_state(const nlohmann::json& state) override {
+    load_common(state);
+    try {
+      told_x_.clear();
+      told_f_.clear();
+      pending_units_.clear();
+      for (const auto& u : state.at("told_x")) told_x_.push_back(vector_from(u));
+      for (const auto& v : state.at("told_f"))
+        told_f_.push_back(v.is_null() ? std::numeric_limits<double>::quiet_NaN() : v.get<double>());
+      for (const auto& u : state.at("pending_units")) pending_units_.push_back(vector_from(u));
+      pending_ = state.at("pending").get<bool>();
+    } catch (const nlohmann::json::exception& e) {
+      throw std::invalid_argument(std::string("bo state: ") + e.what());
+    }
+    if (told_x_.size() != told_f_.size()) throw std::invalid_argument("bo state: told_x and told_f differ in length");
+  }
+
+  // The model of the last proposal (for reports).
+  const SurrogateModel& model() const { return model_; }
+
+ private:
+  Eigen::VectorXd propose() {
+    const int d = space_.dimension();
+    std::vector<TrainingRow> rows = warm_;
+    for (size_t i = 0; i < told_x_.size(); ++i) rows.push_back({told_x_[i], told_f_[i]});
+    std::mt19937_64 rng(mix(mix(options_.seed) ^ static_cast<std::uint64_t>(iteration_ + 1)));
+    model_ = SurrogateModel(surrogate_);
+    Eigen::VectorXd random_point(d);
+    for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
+    if (!model_.fit(rows)) return random_point;
+    std::vector<std::pair<double, Eigen::VectorXd>> scored;
+    auto add = [&](Eigen::VectorXd u) {
+      u = u.cwiseMax(0.0).cwiseMin(1.0);
+      scored.push_back({model_.score(u), u});
+    };
+    add(random_point);
+    for (int c = 1; c < 2000; ++c) {
+      Eigen::VectorXd u(d);
+      for (int k = 0; k < d; ++k) u[k] = uniform01(rng);
+      add(u);
+    }
+    // Around the best training points (finite fitness), Gaussian steps of 0.05.
+    std::vector<size_t> order;
+    for (size_t i = 0; i < rows.size(); ++i)
+      if (std::isfinite(rows[i].fitness)) order.push_back(i);
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return rows[a].fitness < rows[b].fitness; });
+    for (size_t r = 0; r < std::min<size_t>(5, order.size()); ++r)
+      for (int c = 0; c < 20; ++c) {
+        Eigen::VectorXd u = rows[order[r]].unit;
+        for (int k = 0; k < d; ++k) {
+          const double u1 = std::max(uniform01(rng), 0x1.0p-53), u2 = uniform01(rng);
+          u[k] += 0.05 * std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
+        }
+        add(u);
+      }
+    std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    double best_score = scored.front().first;
+    Eigen::VectorXd best = scored.front().second;
+    std::vector<double> lower(static_cast<size_t>(d), 0.0), upper(static_cast<size_t>(d), 1.0), step(static_cast<size_t>(d), 0.05);
+    for (size_t s = 0; s < std::min<size_t>(3, scored.size()); ++s) {
+      std::vector<double> x(scored[s].second.data(), scored[s].second.data() + d);
+      nlopt_opt opt = nlopt_create(NLOPT_LN_BOBYQA, static_cast<unsigned>(d));
+      nlopt_set_lower_bounds(opt, lower.data());
+      nlopt_set_upper_bounds(opt, upper.data());
+      nlopt_set_min_objective(opt, negative_score, &model_);
+      nlopt_set_maxeval(opt, 60);
+      nlopt_set_initial_step(opt, step.data());
+      double value = 0;
+      nlopt_optimize(opt, x.data(), &value);
+      nlopt_destroy(opt);
+      Eigen::VectorXd u = Eigen::Map<Eigen::VectorXd>(x.data(), d).cwiseMax(0.0).cwiseMin(1.0);
+      const double sc = model_.score(u);
+      if (sc > best_score) {
+        best_score = sc;
+        best = u;
+      }
+    }
+    return best;
+  }
+
+  SurrogateOptions surrogate_;
+  std::vector<TrainingRow> warm_;
+  Eigen::MatrixXd design_;
+  std::vector<Eigen::VectorXd> told_x_;
+  std::vector<double> told_f_;
+  std::vector<Eigen::VectorXd> pending_units_;
+  bool pending_ = false;
+  SurrogateModel model_;
+};
+
+}  // namespace
+
+std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
+                                                          const optimise::OptimiserOptions& options,
+                                                          const SurrogateOptions& surrogate,
+                                                          std::vector<TrainingRow> warm_rows) {
+  space.Validate();
+  if (options.population < 1) throw std::invalid_argument("bo: population must be >= 1");
+  if (options.evaluation_budget() < 1) throw std::invalid_argument("bo: the evaluation budget must be >= 1");
+  return std::make_unique<BayesOptimiser>(space, options, surrogate, std::move(warm_rows));
+}
+
+}  // namespace demcal::surrogate

@@ -1,0 +1,276 @@
+// Surrogate pre-screening in campaigns: the archive adapter, "never a prediction" in the archive and
+// the optimiser, a warm second campaign, and kill -9 / --resume with the surrogate on. Campaigns run
+// the toy external simulator (tests/pipelines/toy_simulator.py) through the demcal program.
+#include "demcal/pipelines/archive.hpp"
+#include "demcal/pipelines/campaign.hpp"
+#include "demcal/pipelines/process.hpp"
+#include "demcal/pipelines/surrogate_data.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <random>
+#include <set>
+#include <thread>
+
+namespace fs = std::filesystem;
+using namespace demcal;
+using namespace demcal::pipelines;
+using nlohmann::json;
+using test_support::python;
+using test_support::read_json;
+
+namespace {
+
+fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("surrogate", name); }
+
+std::string make_measurement(const fs::path& dir) {
+  const std::string path = (dir / "measured.csv").string();
+  ProcessOptions o;
+  o.argv = {python(), test_support::kToySimulator, "2e7", "32", path, "--noise", "20", "--seed", "7"};
+  o.timeout_s = 30;
+  EXPECT_TRUE(run_process(o).ok());
+  return path;
+}
+
+// The toy wall: failures (a crashed program) above 42 degrees, a surrogate that screens 8 -> 4.
+json toy_campaign(const fs::path& dir, std::uint64_t seed = 3) {
+  return {{"name", "toy-surrogate"},
+          {"measured", make_measurement(dir)},
+          {"parameters", {{{"name", "k"}, {"lower", 1e6}, {"upper", 1e8}, {"scale", "log"}},
+                          {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+          {"objective", 1},
+          {"optimiser", {{"algorithm", "tbpso"}, {"population", 8}, {"max_evaluations", 36}, {"seed", seed}}},
+          {"surrogate", {{"k", 4}, {"pool_factor", 4}, {"min_runs", 8}}},
+          {"backend", {{"type", "command"},
+                       {"command", python() + " " + test_support::kToySimulator +
+                                       " {k} {friction_deg} {output} --crash-above 42"},
+                       {"parallel", 2}}},
+          {"report", false}};
+}
+
+ProcessResult calibrate(const fs::path& campaign, const fs::path& out, bool resume, const std::atomic<bool>* kill = nullptr,
+                        const std::string& archive = "") {
+  ProcessOptions o;
+  o.argv = {DEMCAL_BINARY, "calibrate", campaign.string(), "--out", out.string(), "--quiet"};
+  if (!archive.empty()) {
+    o.argv.push_back("--archive");
+    o.argv.push_back(archive);
+  }
+  if (resume) o.argv.push_back("--resume");
+  o.timeout_s = 300;
+  o.cancel = kill;
+  o.stderr_path = out.string() + ".stderr";
+  return run_process(o);
+}
+
+}  // namespace
+
+TEST(SurrogateData, ReadsExactlyTheFinishedRunsOfOneSceneHash) {
+  const auto dir = fresh_dir("adapter");
+  RunArchive archive((dir / "a.sqlite").string());
+  optimise::ParameterSpace space;
+  space.add("kn", 1e8, 1e10, optimise::ParameterSpec::Scale::log10).add("friction_deg", 25, 45).tie("ks", "kn", 2.0);
+  auto insert = [&](const std::string& model, double kn, double friction, const std::string& status, double ks_ratio = 2.0) {
+    RunRecord r;
+    r.model_hash = model;
+    r.params = {{"kn", kn}, {"friction_deg", friction}, {"ks", kn / ks_ratio}};
+    r.code_version = "test";
+    r.backend = "threads";
+    r.status = status;
+    return archive.insert_run(r);
+  };
+  auto score = [&](std::int64_t id, const std::string& key, double fitness) {
+    FitnessRecord f;
+    f.run_id = id;
+    f.objective_key = key;
+    f.fitness = fitness;
+    archive.put_fitness(f);
+  };
+  const std::int64_t a = insert("sceneA", 1e9, 30, "completed");
+  score(a, "obj", 10.0);
+  score(a, "other-objective", 99.0);
+  const std::int64_t b = insert("sceneA", 2e9, 35, "unstable");
+  score(b, "obj", NAN);                                   // a failed run: kept, NaN
+  const std::int64_t c = insert("sceneA", 3e9, 40, "completed");  // not scored yet: left out
+  (void)c;
+  const std::int64_t d = insert("sceneB", 1e9, 30, "completed");  // another scene
+  score(d, "obj", 5.0);
+  const std::int64_t e = insert("sceneA", 4e9, 50, "completed");  // outside the bounds
+  score(e, "obj", 7.0);
+  const std::int64_t f = insert("sceneA", 5e9, 33, "completed", 3.0);  // another tie: another calibration
+  score(f, "obj", 8.0);
+  const std::int64_t g = insert("sceneA", 6e9, 31, "cancelled");
+  score(g, "obj", NAN);
+  const std::int64_t h = insert("sceneA", 7e9, 29, "collapsed");
+  score(h, "obj", 12.0);
+
+  const auto rows = archive_training_rows(archive, space, {{"sceneA", "obj", 1.0}});
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[0].fitness, 10.0);
+  EXPECT_TRUE(std::isnan(rows[1].fitness));
+  EXPECT_EQ(rows[2].fitness, 12.0);
+  EXPECT_TRUE(rows[0].unit.isApprox(space.to_unit(Eigen::Vector2d(1e9, 30))));
+  // The horizon cuts later runs; a second case joins by parameter set and weights the sum.
+  EXPECT_EQ(archive_training_rows(archive, space, {{"sceneA", "obj", 1.0}}, b).size(), 2u);
+  const auto joined = archive_training_rows(archive, space, {{"sceneA", "obj", 1.0}, {"sceneB", "obj", 2.0}});
+  ASSERT_EQ(joined.size(), 1u);
+  EXPECT_EQ(joined[0].fitness, 10.0 + 2.0 * 5.0);
+}
+
+// The archive and the optimiser hold simulated values only; the budget counts simulations; a second
+// campaign on the same archive starts warm (its first iteration is already screened).
+TEST(SurrogateCampaign, ArchiveAndOptimiserNeverHoldAPrediction) {
+  const auto dir = fresh_dir("never-predicted");
+  std::ofstream(dir / "campaign.json") << toy_campaign(dir).dump(2);
+  const auto r = calibrate(dir / "campaign.json", dir / "out", false);
+  ASSERT_TRUE(r.ok()) << r.message;
+  const json result = read_json(dir / "out" / "result.json");
+  ASSERT_TRUE(result.contains("surrogate"));
+  EXPECT_EQ(result["surrogate"]["kind"], "gp");
+  EXPECT_EQ(result["simulations"], 36) << "--max-simulations counts simulations";
+  EXPECT_GT(result["surrogate"]["screened_out"].get<long>(), 0);
+  // Screening starts once 8 runs have a finite fitness; the unscreened batches before are whole.
+  EXPECT_EQ((36 - result["surrogate"]["simulated"].get<long>()) % 8, 0);
+  EXPECT_TRUE(result["surrogate"]["cv_error"].is_number());
+
+  RunArchive archive((dir / "out" / "archive.sqlite").string());
+  const auto campaign = archive.latest_campaign(archive.campaigns().back().config_key);
+  ASSERT_TRUE(campaign);
+  const auto evaluations = archive.evaluations(campaign->id);
+  EXPECT_EQ(evaluations.size(), 36u);
+  std::set<double> simulated;
+  for (const auto& e : evaluations) {
+    ASSERT_EQ(e.run_ids.size(), 1u);
+    const auto run = archive.run(e.run_ids[0]);
+    ASSERT_TRUE(run) << "every evaluation is a simulated run";
+    const auto fitness = archive.find_fitness(run->id, archive.model_objectives().front().objective_key);
+    ASSERT_TRUE(fitness);
+    if (std::isnan(e.fitness)) {
+      EXPECT_TRUE(std::isnan(fitness->fitness));
+    } else {
+      EXPECT_EQ(e.fitness, fitness->fitness) << "the evaluation's value is its run's";
+      simulated.insert(e.fitness);
+    }
+  }
+  std::set<std::string> distinct;
+  for (const auto& e : evaluations) distinct.insert(parameter_key(e.params));
+  EXPECT_EQ(archive.run_count(), static_cast<std::int64_t>(distinct.size())) << "no run but the simulated ones";
+  // Every value in every saved optimiser state is simulated (or the +inf of "nothing yet").
+  for (const auto& it : archive.iterations(campaign->id)) {
+    const json state = json::parse(it.optimiser_state).at("optimiser");
+    for (const char* key : {"fx", "fp"})
+      for (const auto& v : state.at(key))
+        if (v.is_number()) EXPECT_TRUE(simulated.count(v.get<double>())) << key << " holds " << v;
+    if (state.at("best_value").is_number()) EXPECT_TRUE(simulated.count(state.at("best_value").get<double>()));
+  }
+
+  // A second campaign (another seed) on the same archive: warm from the first one's 36 runs.
+  json second = toy_campaign(dir, 4);
+  std::ofstream(dir / "second.json") << second.dump(2);
+  const auto r2 = calibrate(dir / "second.json", dir / "second", false, nullptr, (dir / "out" / "archive.sqlite").string());
+  ASSERT_TRUE(r2.ok()) << r2.message;
+  const json warm = read_json(dir / "second" / "result.json");
+  EXPECT_EQ(warm["surrogate"]["simulated"], 36) << "screened from the first iteration on";
+}
+
+// kill -9 during a screened campaign, then --resume: the result is the uninterrupted one.
+TEST(SurrogateCampaign, KilledAndResumedEndsWithTheUninterruptedResult) {
+  const auto dir = fresh_dir("resume");
+  std::ofstream(dir / "campaign.json") << toy_campaign(dir, 5).dump(2);
+  const std::string log = (dir / "simulator.log").string();
+  ::setenv("TOY_SIMULATOR_LOG", log.c_str(), 1);
+  auto logged_runs = [&] {
+    std::ifstream in(log);
+    size_t lines = 0;
+    for (std::string line; std::getline(in, line);) ++lines;
+    return lines;
+  };
+  const auto reference = calibrate(dir / "campaign.json", dir / "uninterrupted", false);
+  ASSERT_TRUE(reference.ok()) << reference.message;
+  fs::remove(log);
+  std::mt19937 rng(77);
+  // Kills after 10..14 runs (inside the screened iterations), then after 4..6 more.
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    const size_t target = logged_runs() + static_cast<size_t>(attempt == 0 ? 10 + rng() % 5 : 4 + rng() % 3);
+    std::atomic<bool> kill{false}, ended{false};
+    std::thread watcher([&] {
+      while (!ended.load() && logged_runs() < target) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(rng() % 40)));
+      kill.store(true);
+    });
+    const auto r = calibrate(dir / "campaign.json", dir / "killed", attempt > 0, &kill);
+    ended.store(true);
+    watcher.join();
+    ASSERT_EQ(r.status, ProcessStatus::cancelled) << "attempt " << attempt << " was not killed: " << r.message;
+  }
+  const auto last = calibrate(dir / "campaign.json", dir / "killed", true);
+  ::unsetenv("TOY_SIMULATOR_LOG");
+  ASSERT_TRUE(last.ok()) << last.message;
+  auto comparable = [](json j) {
+    j.erase("wall_time_s");
+    j.erase("session");
+    j.erase("archive");
+    return j;
+  };
+  const json a = comparable(read_json(dir / "uninterrupted" / "result.json"));
+  const json b = comparable(read_json(dir / "killed" / "result.json"));
+  EXPECT_EQ(a.dump(), b.dump());
+  EXPECT_GT(a["surrogate"]["screened_out"].get<long>(), 0);
+}
+
+// `demcal surrogate check` and `train` on a campaign's archive, and a trained model used by
+// `demcal calibrate --surrogate MODEL` (it screens from the first iteration on).
+TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
+  const auto dir = fresh_dir("cli");
+  json campaign = toy_campaign(dir);
+  campaign.erase("surrogate");
+  campaign["optimiser"]["max_evaluations"] = 40;
+  std::ofstream(dir / "campaign.json") << campaign.dump(2);
+  ASSERT_TRUE(calibrate(dir / "campaign.json", dir / "plain", false).ok());
+  const std::string archive = (dir / "plain" / "archive.sqlite").string();
+  auto demcal = [&](const std::vector<std::string>& args, const std::string& out) {
+    ProcessOptions o;
+    o.argv = {DEMCAL_BINARY};
+    o.argv.insert(o.argv.end(), args.begin(), args.end());
+    o.stdout_path = (dir / out).string();
+    o.stderr_path = (dir / (out + ".stderr")).string();
+    o.timeout_s = 120;
+    return run_process(o);
+  };
+  ASSERT_TRUE(demcal({"surrogate", "check", "--archive", archive}, "check.json").ok());
+  const json check = read_json(dir / "check.json");
+  RunArchive a(archive);
+  EXPECT_EQ(check["rows"].get<std::int64_t>(), a.run_count());
+  const json& cv = check["cross_validation"];
+  EXPECT_EQ(cv["finite_rows"].get<long>() + cv["failed_rows"].get<long>(), check["rows"].get<long>());
+  EXPECT_GE(cv["coverage90"].get<double>(), 0.0);
+  EXPECT_LE(cv["coverage90"].get<double>(), 1.0);
+  EXPECT_LT(cv["relative_error"].get<double>(), 1.0) << "better than predicting the mean";
+
+  ASSERT_TRUE(demcal({"surrogate", "train", "--archive", archive, "--out", (dir / "model.json").string()}, "train.json").ok());
+  EXPECT_EQ(read_json(dir / "model.json")["format"], "demcal-surrogate");
+  EXPECT_EQ(read_json(dir / "train.json")["rows"], check["rows"]);
+
+  const auto wrong = demcal({"surrogate", "train", "--archive", archive, "--scene-hash", "0123", "--out",
+                             (dir / "x.json").string()}, "wrong.json");
+  EXPECT_FALSE(wrong.ok());
+  std::ifstream err(dir / "wrong.json.stderr");
+  const std::string message((std::istreambuf_iterator<char>(err)), std::istreambuf_iterator<char>());
+  EXPECT_NE(message.find("0123"), std::string::npos) << message;
+
+  // A fresh archive, the trained model: screened from the first batch.
+  json with_model = toy_campaign(dir, 9);
+  with_model["surrogate"]["model"] = (dir / "model.json").string();
+  with_model["optimiser"]["max_evaluations"] = 12;
+  std::ofstream(dir / "with-model.json") << with_model.dump(2);
+  ASSERT_TRUE(calibrate(dir / "with-model.json", dir / "with-model", false).ok());
+  const json result = read_json(dir / "with-model" / "result.json");
+  EXPECT_EQ(result["surrogate"]["simulated"], 12);
+  // 8 proposed -> 4 simulated, twice; the last batch is cut to the 4 simulations left.
+  EXPECT_EQ(result["surrogate"]["screened_out"], 8);
+}
