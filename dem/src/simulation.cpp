@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -106,6 +107,16 @@ struct GroupLaw {
   bool plain = true;
 };
 
+// DEMCAL_ENGINE_PATH=reference selects the engine's node loop as it was before its two-stage
+// (vectorised) form; read once per process. Any other value, or none, selects the current path.
+bool reference_path_requested() {
+  static const bool requested = [] {
+    const char* v = std::getenv("DEMCAL_ENGINE_PATH");
+    return v != nullptr && std::string(v) == "reference";
+  }();
+  return requested;
+}
+
 class Engine {
  public:
   explicit Engine(const Scene& scene) : scene_(scene) {
@@ -116,6 +127,7 @@ class Engine {
     margin_ = scene_.contact.search_margin;
     setup_loading();
     setup_gap();
+    for (auto* scratch : {&soa_x_, &soa_y_, &soa_area_, &soa_increment_}) scratch->assign(std::max(points_, 1), 0.0);
     dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
   }
 
@@ -139,6 +151,13 @@ class Engine {
   [[gnu::noinline]] void process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
                                                     const NodeLayout& layout, const std::vector<double>& s_nodes,
                                                     const std::vector<double>& gaps, const std::vector<double>& lengths);
+  void edge_nodes(double lo, double spacing, double s1, double s2, double g1, double g2);
+  void process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law, const NodeLayout& layout,
+                           const std::vector<double>& s_nodes, const std::vector<double>& gaps,
+                           const std::vector<double>& lengths);
+  void process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                  const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                  const std::vector<double>& gaps, const std::vector<double>& lengths);
   void integrate();
   double unbalanced_ratio() const;
   double actuator_force() const;
@@ -162,6 +181,11 @@ class Engine {
   bool loading_stage_ = false;
   bool first_step_ = true;  // bonds (cohesion) exist only at joints present at the start
   long node_updates_ = 0;
+  // The engine's previous code path (DEMCAL_ENGINE_PATH=reference), kept for speed comparisons.
+  bool reference_path_ = reference_path_requested();
+  // Scratch of the node loop, sized once per joint layout (no allocation in the step).
+  std::vector<double> node_s_, node_gap_, node_length_;          // per node: s along the face, gap, length
+  std::vector<double> soa_x_, soa_y_, soa_area_, soa_increment_;  // per node: kinematics (stage 1)
 
   // joint-gap: the pair key and the joint's two ends in the first block's frame.
   bool has_gap_ = false;
@@ -396,10 +420,9 @@ void Engine::process_pair(int ia, int ib) {
   const bool edge_contact = -most_opposed >= cos_edge_tolerance_;
 
   // Node positions along the reference face (coordinate s from r1 along tr), gaps and lengths.
-  thread_local std::vector<double> s_nodes, gaps, lengths;
-  s_nodes.clear();
-  gaps.clear();
-  lengths.clear();
+  std::vector<double>& s_nodes = node_s_;
+  std::vector<double>& gaps = node_gap_;
+  std::vector<double>& lengths = node_length_;
   if (edge_contact) {
     const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[(inc_edge + 1) % ni];
     const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
@@ -407,12 +430,19 @@ void Engine::process_pair(int ia, int ib) {
     if (hi - lo <= 1e-9 * ref_length) return;
     const double g1 = (q1 - r1).dot(normal), g2 = (q2 - r1).dot(normal);
     const double spacing = (hi - lo) / (points_ - 1);
-    for (int k = 0; k < points_; ++k) {
-      const double s = lo + k * spacing;
-      const double u = (s - s1) / (s2 - s1);
-      s_nodes.push_back(s);
-      gaps.push_back(g1 + u * (g2 - g1));
-      lengths.push_back((k == 0 || k == points_ - 1) ? 0.5 * spacing : spacing);
+    if (reference_path_) {
+      s_nodes.clear();
+      gaps.clear();
+      lengths.clear();
+      for (int k = 0; k < points_; ++k) {
+        const double s = lo + k * spacing;
+        const double u = (s - s1) / (s2 - s1);
+        s_nodes.push_back(s);
+        gaps.push_back(g1 + u * (g2 - g1));
+        lengths.push_back((k == 0 || k == points_ - 1) ? 0.5 * spacing : spacing);
+      }
+    } else {
+      edge_nodes(lo, spacing, s1, s2, g1, g2);
     }
   } else {
     // Corner against face: the deepest vertex of the incident polygon, if it lies over the face.
@@ -429,9 +459,9 @@ void Engine::process_pair(int ia, int ib) {
     if (s < 0 || s > ref_length) return;
     const double shorter = std::min((inc.world[(deepest + 1) % ni] - inc.world[deepest]).norm(),
                                     (inc.world[(deepest + ni - 1) % ni] - inc.world[deepest]).norm());
-    s_nodes.push_back(s);
-    gaps.push_back(depth);
-    lengths.push_back(shorter / (2.0 * (points_ - 1)));
+    s_nodes.assign(1, s);
+    gaps.assign(1, depth);
+    lengths.assign(1, shorter / (2.0 * (points_ - 1)));
   }
 
   const Vec2 normal_ab = ref_on_a ? normal : Vec2(-normal);
@@ -454,7 +484,7 @@ void Engine::process_pair(int ia, int ib) {
   contact.seen = true;
   contact.corner = !edge_contact;
   contact.ref_on_a = ref_on_a;
-  contact.gap.resize(count);
+  if (static_cast<int>(contact.gap.size()) != count) contact.gap.resize(count);
 
   if (!group.plain || (has_gap_ && key == gap_key_)) {
     const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, has_gap_ && key == gap_key_};
@@ -462,14 +492,126 @@ void Engine::process_pair(int ia, int ib) {
     return;
   }
   // The plain law: every joint group without effects, exactly as the engine was before them.
-  const MohrCoulombLaw& law = group.law;
+  const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, false};
+  if (reference_path_)
+    process_plain_nodes_scalar(a, b, contact, group.law, layout, s_nodes, gaps, lengths);
+  else
+    process_plain_nodes(a, b, contact, group.law, layout, s_nodes, gaps, lengths);
+}
+
+// Edge-contact nodes: `points_` nodes spaced evenly over [lo, lo + (points_ - 1) spacing] of the
+// reference face, their gaps interpolated linearly between the incident edge's ends (s1, g1) and
+// (s2, g2), and their tributary lengths (half a spacing at the two ends). Indexed writes into
+// arrays that keep their size from step to step (no allocation, no push_back bookkeeping), so the
+// loop vectorises; the arithmetic per node is the scalar form's, operation for operation.
+void Engine::edge_nodes(double lo, double spacing, double s1, double s2, double g1, double g2) {
+  const int n = points_;
+  if (static_cast<int>(node_s_.size()) != n) {  // after a corner contact (one node)
+    node_s_.resize(n);
+    node_gap_.resize(n);
+    node_length_.resize(n);
+  }
+  double* __restrict s = node_s_.data();
+  double* __restrict gap = node_gap_.data();
+  double* __restrict length = node_length_.data();
+  for (int k = 0; k < n; ++k) {
+    s[k] = lo + k * spacing;
+    const double u = (s[k] - s1) / (s2 - s1);
+    gap[k] = g1 + u * (g2 - g1);
+    length[k] = spacing;
+  }
+  length[0] = 0.5 * spacing;
+  length[n - 1] = 0.5 * spacing;
+}
+
+// The plain law's node loop in two stages.
+// Stage 1 (vectorised): the kinematics of every node into structure-of-arrays scratch: position
+// x/y, penetration, tributary area and shear increment along tangent_ab. It replaces, per node,
+//   point = r1 + s tr + 0.5 gap normal;  kin.shear_increment = (v_b(point) - v_a(point)) . t dt
+// written out component by component in the same order of operations (bit-identical results).
+// Stage 2 (scalar): the Mohr-Coulomb law with its per-node shear memory and the pair's resultant,
+// summed in node order as before (a floating-point sum cannot be reordered without changing bits).
+void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                 const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                 const std::vector<double>& gaps, const std::vector<double>& lengths) {
+  const int count = static_cast<int>(s_nodes.size());  // at most points_, the scratch's size
+  double* __restrict px = soa_x_.data();
+  double* __restrict py = soa_y_.data();
+  double* __restrict area = soa_area_.data();
+  double* __restrict increment = soa_increment_.data();
+  const double* __restrict s = s_nodes.data();
+  const double* __restrict gap = gaps.data();
+  const double* __restrict length = lengths.data();
+  const double r1x = layout.r1.x(), r1y = layout.r1.y(), trx = layout.tr.x(), try_ = layout.tr.y();
+  const double nx = layout.normal.x(), ny = layout.normal.y();
+  const double tx = layout.tangent_ab.x(), ty = layout.tangent_ab.y();
+  const double vax = a.velocity.x(), vay = a.velocity.y(), wa = a.angular_velocity;
+  const double vbx = b.velocity.x(), vby = b.velocity.y(), wb = b.angular_velocity;
+  const double ax = a.position.x(), ay = a.position.y(), bx = b.position.x(), by = b.position.y();
+  const double width = scene_.width, dt = dt_;
+  for (int k = 0; k < count; ++k) {
+    const double half_gap = 0.5 * gap[k];
+    const double x = (r1x + s[k] * trx) + half_gap * nx;
+    const double y = (r1y + s[k] * try_) + half_gap * ny;
+    px[k] = x;
+    py[k] = y;
+    area[k] = length[k] * width;
+    // velocity_at(p) = v + w perp(p - c), perp(d) = (-d.y, d.x)
+    const double ub_x = vbx + wb * -(y - by), ub_y = vby + wb * (x - bx);
+    const double ua_x = vax + wa * -(y - ay), ua_y = vay + wa * (x - ax);
+    const double slide = ((ub_x - ua_x) * tx + (ub_y - ua_y) * ty) * dt;
+    increment[k] = -gap[k] > 0 ? slide : 0.0;
+  }
+
   double slip_weighted = 0, length_total = 0;
   bool touching = false;
   // The pair's resultant: force on b and its moment about the origin, applied once at the end.
+  double fx = 0, fy = 0, moment = 0;
+  const double nabx = layout.normal_ab.x(), naby = layout.normal_ab.y();
+  for (int k = 0; k < count; ++k) {
+    // Nodes are stored in the order of increasing coordinate along tangent_ab.
+    const int slot = layout.ref_on_a ? k : count - 1 - k;
+    contact.gap[slot] = gap[k];
+    NodeKinematics kin;
+    kin.penetration = -gap[k];
+    kin.area = area[k];
+    kin.shear_increment = increment[k];
+    const NodeForces f = law.evaluate(kin, contact.shear[slot]);
+    if (f.normal == 0) continue;
+    touching = true;
+    const double force_x = f.normal * nabx + f.shear * tx, force_y = f.normal * naby + f.shear * ty;
+    fx += force_x;
+    fy += force_y;
+    moment += px[k] * force_y - py[k] * force_x;
+    slip_weighted += f.plastic_slip * length[k];
+    length_total += length[k];
+  }
+  node_updates_ += count;
+  if (touching) {
+    const Vec2 resultant(fx, fy);
+    b.force += resultant;
+    b.torque += moment - cross(b.position, resultant);
+    a.force -= resultant;
+    a.torque -= moment - cross(a.position, resultant);
+  }
+  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
+  if (touching && loading_stage_) contact.ever_touched = true;
+}
+
+// The plain law's node loop as the engine ran it before the two-stage form above, one node at a
+// time; selected with DEMCAL_ENGINE_PATH=reference for comparisons.
+void Engine::process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                        const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                        const std::vector<double>& gaps, const std::vector<double>& lengths) {
+  const int count = static_cast<int>(s_nodes.size());
+  const Vec2 r1 = layout.r1, tr = layout.tr, normal = layout.normal;
+  const Vec2 normal_ab = layout.normal_ab, tangent_ab = layout.tangent_ab;
+  const bool ref_on_a = layout.ref_on_a;
+  double slip_weighted = 0, length_total = 0;
+  bool touching = false;
   Vec2 resultant = Vec2::Zero();
   double moment = 0;
   for (int k = 0; k < count; ++k) {
-    // Nodes are stored in the order of increasing coordinate along tangent_ab.
     const int slot = ref_on_a ? k : count - 1 - k;
     const double gap = gaps[k];
     contact.gap[slot] = gap;
