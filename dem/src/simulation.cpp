@@ -107,6 +107,41 @@ struct GroupLaw {
   bool plain = true;
 };
 
+// What stage 1 of the plain node loop needs of a pair: the reference face (r1, tr, normal), the
+// tangent along which shear acts on the second block, both blocks' velocities and centroids, the
+// wall's width (m) and the time step (s).
+struct NodeFrame {
+  double r1x, r1y, trx, try_, nx, ny, tx, ty;
+  double vax, vay, wa, ax, ay;
+  double vbx, vby, wb, bx, by;
+  double width, dt;
+};
+
+// Stage 1 of the plain node loop, for `count` nodes at coordinates s along the reference face with
+// gaps `gap` and tributary lengths `length`: node position (x, y), tributary area and the shear
+// increment of this step. Per node this is the scalar form
+//   point = r1 + s tr + 0.5 gap normal;
+//   increment = (v_b(point) - v_a(point)) . t dt,  v(p) = v + w perp(p - c), perp(d) = (-d.y, d.x)
+// with the same operations in the same order (bit-identical), over plain arrays (restrict
+// parameters, no branch) so that the compiler vectorises it. The increment is also written for open
+// nodes; the law reads it only where the faces overlap.
+static void node_kinematics(int count, const NodeFrame& f, const double* __restrict s, const double* __restrict gap,
+                            const double* __restrict length, double* __restrict px, double* __restrict py,
+                            double* __restrict area, double* __restrict increment) {
+  const NodeFrame c = f;  // a local copy: no aliasing with the outputs
+  for (int k = 0; k < count; ++k) {
+    const double half_gap = 0.5 * gap[k];
+    const double x = (c.r1x + s[k] * c.trx) + half_gap * c.nx;
+    const double y = (c.r1y + s[k] * c.try_) + half_gap * c.ny;
+    px[k] = x;
+    py[k] = y;
+    area[k] = length[k] * c.width;
+    const double ub_x = c.vbx + c.wb * -(y - c.by), ub_y = c.vby + c.wb * (x - c.bx);
+    const double ua_x = c.vax + c.wa * -(y - c.ay), ua_y = c.vay + c.wa * (x - c.ax);
+    increment[k] = ((ub_x - ua_x) * c.tx + (ub_y - ua_y) * c.ty) * c.dt;
+  }
+}
+
 // DEMCAL_ENGINE_PATH=reference selects the engine's node loop as it was before its two-stage
 // (vectorised) form; read once per process. Any other value, or none, selects the current path.
 bool reference_path_requested() {
@@ -535,33 +570,18 @@ void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrC
                                  const NodeLayout& layout, const std::vector<double>& s_nodes,
                                  const std::vector<double>& gaps, const std::vector<double>& lengths) {
   const int count = static_cast<int>(s_nodes.size());  // at most points_, the scratch's size
-  double* __restrict px = soa_x_.data();
-  double* __restrict py = soa_y_.data();
-  double* __restrict area = soa_area_.data();
-  double* __restrict increment = soa_increment_.data();
-  const double* __restrict s = s_nodes.data();
-  const double* __restrict gap = gaps.data();
-  const double* __restrict length = lengths.data();
-  const double r1x = layout.r1.x(), r1y = layout.r1.y(), trx = layout.tr.x(), try_ = layout.tr.y();
-  const double nx = layout.normal.x(), ny = layout.normal.y();
-  const double tx = layout.tangent_ab.x(), ty = layout.tangent_ab.y();
-  const double vax = a.velocity.x(), vay = a.velocity.y(), wa = a.angular_velocity;
-  const double vbx = b.velocity.x(), vby = b.velocity.y(), wb = b.angular_velocity;
-  const double ax = a.position.x(), ay = a.position.y(), bx = b.position.x(), by = b.position.y();
-  const double width = scene_.width, dt = dt_;
-  for (int k = 0; k < count; ++k) {
-    const double half_gap = 0.5 * gap[k];
-    const double x = (r1x + s[k] * trx) + half_gap * nx;
-    const double y = (r1y + s[k] * try_) + half_gap * ny;
-    px[k] = x;
-    py[k] = y;
-    area[k] = length[k] * width;
-    // velocity_at(p) = v + w perp(p - c), perp(d) = (-d.y, d.x)
-    const double ub_x = vbx + wb * -(y - by), ub_y = vby + wb * (x - bx);
-    const double ua_x = vax + wa * -(y - ay), ua_y = vay + wa * (x - ax);
-    const double slide = ((ub_x - ua_x) * tx + (ub_y - ua_y) * ty) * dt;
-    increment[k] = -gap[k] > 0 ? slide : 0.0;
-  }
+  const double* gap = gaps.data();
+  const double* length = lengths.data();
+  const double* px = soa_x_.data();
+  const double* py = soa_y_.data();
+  const double* area = soa_area_.data();
+  const double* increment = soa_increment_.data();
+  const NodeFrame frame{layout.r1.x(), layout.r1.y(), layout.tr.x(), layout.tr.y(), layout.normal.x(),
+                        layout.normal.y(), layout.tangent_ab.x(), layout.tangent_ab.y(), a.velocity.x(),
+                        a.velocity.y(), a.angular_velocity, a.position.x(), a.position.y(), b.velocity.x(),
+                        b.velocity.y(), b.angular_velocity, b.position.x(), b.position.y(), scene_.width, dt_};
+  node_kinematics(count, frame, s_nodes.data(), gap, length, soa_x_.data(), soa_y_.data(), soa_area_.data(),
+                  soa_increment_.data());
 
   double slip_weighted = 0, length_total = 0;
   bool touching = false;
@@ -579,7 +599,7 @@ void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrC
     const NodeForces f = law.evaluate(kin, contact.shear[slot]);
     if (f.normal == 0) continue;
     touching = true;
-    const double force_x = f.normal * nabx + f.shear * tx, force_y = f.normal * naby + f.shear * ty;
+    const double force_x = f.normal * nabx + f.shear * frame.tx, force_y = f.normal * naby + f.shear * frame.ty;
     fx += force_x;
     fy += force_y;
     moment += px[k] * force_y - py[k] * force_x;
