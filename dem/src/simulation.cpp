@@ -85,6 +85,7 @@ struct AttachedPoint {
 
 // Persistent state of one contacting pair (a joint).
 struct Contact {
+  std::uint64_t key = 0;  // (first block << 32) | second block
   int group = 0;
   bool ref_on_a = true;
   bool corner = false;
@@ -176,7 +177,7 @@ class Engine {
   double critical_time_step() const;
   int group_for(const Body& a, const Body& b, const Vec2& normal) const;
   void compute_forces();
-  void process_pair(int ia, int ib);
+  void process_pair(int ia, int ib, int& contact_index);
   // Geometry of one edge or corner contact's nodes, for the node loop with effects.
   struct NodeLayout {
     Vec2 r1, tr, normal, normal_ab, tangent_ab;
@@ -205,7 +206,11 @@ class Engine {
   std::vector<Body> bodies_;
   std::vector<int> spring_bodies_;  // bodies with support springs or a rotational restraint
   std::vector<GroupLaw> groups_;
-  std::unordered_map<std::uint64_t, Contact> contacts_;
+  std::vector<Contact> contacts_;                         // every joint ever within the search margin
+  std::unordered_map<std::uint64_t, int> contact_index_;  // pair key -> index in contacts_
+  // This step's and the previous step's broad-phase pairs, sorted by key, with their contact's
+  // index (-1: none yet): a pair that stays a pair finds its contact by a merge, without hashing.
+  std::vector<std::pair<std::uint64_t, int>> pair_contacts_, previous_pair_contacts_;
   std::vector<std::pair<int, int>> pairs_;
   std::vector<int> order_;
   int points_ = 15;
@@ -417,7 +422,8 @@ static std::pair<double, int> max_separation(const Body& p, const Body& q, doubl
   return {best, best_edge};
 }
 
-void Engine::process_pair(int ia, int ib) {
+// `contact_index`: the pair's contact in contacts_, or -1 (set here when the contact is created).
+void Engine::process_pair(int ia, int ib, int& contact_index) {
   Body& a = bodies_[ia];
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
@@ -426,13 +432,13 @@ void Engine::process_pair(int ia, int ib) {
   const auto [sep_b, edge_b] = max_separation(b, a, margin_);
   if (sep_b > margin_) return;
 
-  auto it = contacts_.find(key);
+  Contact* existing = contact_index >= 0 ? &contacts_[contact_index] : nullptr;
   // Reference face: the polygon whose face separates more; hysteresis keeps the previous choice
   // while the two are within a small tolerance (near-parallel faces would otherwise flip).
   const double tolerance = 1e-3 * margin_ + 1e-12;
   bool ref_on_a = sep_a >= sep_b;
-  if (it != contacts_.end() && it->second.active)
-    ref_on_a = it->second.ref_on_a ? sep_a >= sep_b - tolerance : sep_a > sep_b + tolerance;
+  if (existing != nullptr && existing->active)
+    ref_on_a = existing->ref_on_a ? sep_a >= sep_b - tolerance : sep_a > sep_b + tolerance;
 
   const Body& ref = ref_on_a ? a : b;
   const Body& inc = ref_on_a ? b : a;
@@ -501,12 +507,15 @@ void Engine::process_pair(int ia, int ib) {
 
   const Vec2 normal_ab = ref_on_a ? normal : Vec2(-normal);
   const Vec2 tangent_ab = perp(normal_ab);
-  if (it == contacts_.end()) {
+  if (existing == nullptr) {
     Contact c;
+    c.key = key;
     c.group = group_for(a, b, normal_ab);
-    it = contacts_.emplace(key, std::move(c)).first;
+    contact_index = static_cast<int>(contacts_.size());
+    contact_index_.emplace(key, contact_index);
+    contacts_.push_back(std::move(c));
   }
-  Contact& contact = it->second;
+  Contact& contact = contacts_[contact_index];
   const int count = static_cast<int>(s_nodes.size());
   const GroupLaw& group = groups_[contact.group];
   if (!contact.active || contact.corner != !edge_contact || static_cast<int>(contact.shear.size()) != count) {
@@ -756,10 +765,26 @@ void Engine::compute_forces() {
     }
   }
   std::sort(pairs_.begin(), pairs_.end());
-  for (auto& [key, c] : contacts_) c.seen = false;
-  for (const auto& [i, j] : pairs_) process_pair(i, j);
+  // Each pair's contact: found in the previous step's list by a merge (both sorted by key), or by a
+  // hash look-up for a pair new to the broad phase (the reference path looks up every pair).
+  pair_contacts_.clear();
+  std::size_t previous = 0;
+  for (const auto& [i, j] : pairs_) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
+    int index = -1;
+    while (previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first < key) ++previous;
+    if (!reference_path_ && previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first == key) {
+      index = previous_pair_contacts_[previous].second;
+    } else if (const auto found = contact_index_.find(key); found != contact_index_.end()) {
+      index = found->second;
+    }
+    pair_contacts_.emplace_back(key, index);
+  }
+  for (Contact& c : contacts_) c.seen = false;
+  for (std::size_t p = 0; p < pairs_.size(); ++p) process_pair(pairs_[p].first, pairs_[p].second, pair_contacts_[p].second);
+  std::swap(pair_contacts_, previous_pair_contacts_);
   first_step_ = false;
-  for (auto& [key, c] : contacts_) {
+  for (Contact& c : contacts_) {
     c.active = c.seen;
     if (!c.active) std::fill(c.gap.begin(), c.gap.end(), std::numeric_limits<double>::infinity());
   }
@@ -946,7 +971,7 @@ void Engine::finish(Recording& rec) const {
     rec.final_blocks.push_back(std::move(s));
   }
   std::vector<std::pair<std::uint64_t, const Contact*>> sorted;
-  for (const auto& [key, c] : contacts_) sorted.emplace_back(key, &c);
+  for (const Contact& c : contacts_) sorted.emplace_back(c.key, &c);
   std::sort(sorted.begin(), sorted.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
   for (const auto& [key, c] : sorted) {
     const int ia = static_cast<int>(key >> 32), ib = static_cast<int>(key & 0xffffffffu);
