@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -84,6 +85,7 @@ struct AttachedPoint {
 
 // Persistent state of one contacting pair (a joint).
 struct Contact {
+  std::uint64_t key = 0;  // (first block << 32) | second block
   int group = 0;
   bool ref_on_a = true;
   bool corner = false;
@@ -106,6 +108,51 @@ struct GroupLaw {
   bool plain = true;
 };
 
+// What stage 1 of the plain node loop needs of a pair: the reference face (r1, tr, normal), the
+// tangent along which shear acts on the second block, both blocks' velocities and centroids, the
+// wall's width (m) and the time step (s).
+struct NodeFrame {
+  double r1x, r1y, trx, try_, nx, ny, tx, ty;
+  double vax, vay, wa, ax, ay;
+  double vbx, vby, wb, bx, by;
+  double width, dt;
+};
+
+// Stage 1 of the plain node loop, for `count` nodes at coordinates s along the reference face with
+// gaps `gap` and tributary lengths `length`: node position (x, y), tributary area and the shear
+// increment of this step. Per node this is the scalar form
+//   point = r1 + s tr + 0.5 gap normal;
+//   increment = (v_b(point) - v_a(point)) . t dt,  v(p) = v + w perp(p - c), perp(d) = (-d.y, d.x)
+// with the same operations in the same order (bit-identical), over plain arrays (restrict
+// parameters, no branch) so that the compiler vectorises it. The increment is also written for open
+// nodes; the law reads it only where the faces overlap.
+static void node_kinematics(int count, const NodeFrame& f, const double* __restrict s, const double* __restrict gap,
+                            const double* __restrict length, double* __restrict px, double* __restrict py,
+                            double* __restrict area, double* __restrict increment) {
+  const NodeFrame c = f;  // a local copy: no aliasing with the outputs
+  for (int k = 0; k < count; ++k) {
+    const double half_gap = 0.5 * gap[k];
+    const double x = (c.r1x + s[k] * c.trx) + half_gap * c.nx;
+    const double y = (c.r1y + s[k] * c.try_) + half_gap * c.ny;
+    px[k] = x;
+    py[k] = y;
+    area[k] = length[k] * c.width;
+    const double ub_x = c.vbx + c.wb * -(y - c.by), ub_y = c.vby + c.wb * (x - c.bx);
+    const double ua_x = c.vax + c.wa * -(y - c.ay), ua_y = c.vay + c.wa * (x - c.ax);
+    increment[k] = ((ub_x - ua_x) * c.tx + (ub_y - ua_y) * c.ty) * c.dt;
+  }
+}
+
+// DEMCAL_ENGINE_PATH=reference selects the engine's node loop as it was before its two-stage
+// (vectorised) form; read once per process. Any other value, or none, selects the current path.
+bool reference_path_requested() {
+  static const bool requested = [] {
+    const char* v = std::getenv("DEMCAL_ENGINE_PATH");
+    return v != nullptr && std::string(v) == "reference";
+  }();
+  return requested;
+}
+
 class Engine {
  public:
   explicit Engine(const Scene& scene) : scene_(scene) {
@@ -116,6 +163,7 @@ class Engine {
     margin_ = scene_.contact.search_margin;
     setup_loading();
     setup_gap();
+    for (auto* scratch : {&soa_x_, &soa_y_, &soa_area_, &soa_increment_}) scratch->assign(std::max(points_, 1), 0.0);
     dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
   }
 
@@ -129,7 +177,7 @@ class Engine {
   double critical_time_step() const;
   int group_for(const Body& a, const Body& b, const Vec2& normal) const;
   void compute_forces();
-  void process_pair(int ia, int ib);
+  void process_pair(int ia, int ib, int& contact_index);
   // Geometry of one edge or corner contact's nodes, for the node loop with effects.
   struct NodeLayout {
     Vec2 r1, tr, normal, normal_ab, tangent_ab;
@@ -139,6 +187,13 @@ class Engine {
   [[gnu::noinline]] void process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
                                                     const NodeLayout& layout, const std::vector<double>& s_nodes,
                                                     const std::vector<double>& gaps, const std::vector<double>& lengths);
+  void edge_nodes(double lo, double spacing, double s1, double s2, double g1, double g2);
+  void process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law, const NodeLayout& layout,
+                           const std::vector<double>& s_nodes, const std::vector<double>& gaps,
+                           const std::vector<double>& lengths);
+  void process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                  const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                  const std::vector<double>& gaps, const std::vector<double>& lengths);
   void integrate();
   double unbalanced_ratio() const;
   double actuator_force() const;
@@ -151,7 +206,11 @@ class Engine {
   std::vector<Body> bodies_;
   std::vector<int> spring_bodies_;  // bodies with support springs or a rotational restraint
   std::vector<GroupLaw> groups_;
-  std::unordered_map<std::uint64_t, Contact> contacts_;
+  std::vector<Contact> contacts_;                         // every joint ever within the search margin
+  std::unordered_map<std::uint64_t, int> contact_index_;  // pair key -> index in contacts_
+  // This step's and the previous step's broad-phase pairs, sorted by key, with their contact's
+  // index (-1: none yet): a pair that stays a pair finds its contact by a merge, without hashing.
+  std::vector<std::pair<std::uint64_t, int>> pair_contacts_, previous_pair_contacts_;
   std::vector<std::pair<int, int>> pairs_;
   std::vector<int> order_;
   int points_ = 15;
@@ -162,6 +221,11 @@ class Engine {
   bool loading_stage_ = false;
   bool first_step_ = true;  // bonds (cohesion) exist only at joints present at the start
   long node_updates_ = 0;
+  // The engine's previous code path (DEMCAL_ENGINE_PATH=reference), kept for speed comparisons.
+  bool reference_path_ = reference_path_requested();
+  // Scratch of the node loop, sized once per joint layout (no allocation in the step).
+  std::vector<double> node_s_, node_gap_, node_length_;          // per node: s along the face, gap, length
+  std::vector<double> soa_x_, soa_y_, soa_area_, soa_increment_;  // per node: kinematics (stage 1)
 
   // joint-gap: the pair key and the joint's two ends in the first block's frame.
   bool has_gap_ = false;
@@ -358,7 +422,8 @@ static std::pair<double, int> max_separation(const Body& p, const Body& q, doubl
   return {best, best_edge};
 }
 
-void Engine::process_pair(int ia, int ib) {
+// `contact_index`: the pair's contact in contacts_, or -1 (set here when the contact is created).
+void Engine::process_pair(int ia, int ib, int& contact_index) {
   Body& a = bodies_[ia];
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
@@ -367,13 +432,13 @@ void Engine::process_pair(int ia, int ib) {
   const auto [sep_b, edge_b] = max_separation(b, a, margin_);
   if (sep_b > margin_) return;
 
-  auto it = contacts_.find(key);
+  Contact* existing = contact_index >= 0 ? &contacts_[contact_index] : nullptr;
   // Reference face: the polygon whose face separates more; hysteresis keeps the previous choice
   // while the two are within a small tolerance (near-parallel faces would otherwise flip).
   const double tolerance = 1e-3 * margin_ + 1e-12;
   bool ref_on_a = sep_a >= sep_b;
-  if (it != contacts_.end() && it->second.active)
-    ref_on_a = it->second.ref_on_a ? sep_a >= sep_b - tolerance : sep_a > sep_b + tolerance;
+  if (existing != nullptr && existing->active)
+    ref_on_a = existing->ref_on_a ? sep_a >= sep_b - tolerance : sep_a > sep_b + tolerance;
 
   const Body& ref = ref_on_a ? a : b;
   const Body& inc = ref_on_a ? b : a;
@@ -396,10 +461,9 @@ void Engine::process_pair(int ia, int ib) {
   const bool edge_contact = -most_opposed >= cos_edge_tolerance_;
 
   // Node positions along the reference face (coordinate s from r1 along tr), gaps and lengths.
-  thread_local std::vector<double> s_nodes, gaps, lengths;
-  s_nodes.clear();
-  gaps.clear();
-  lengths.clear();
+  std::vector<double>& s_nodes = node_s_;
+  std::vector<double>& gaps = node_gap_;
+  std::vector<double>& lengths = node_length_;
   if (edge_contact) {
     const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[(inc_edge + 1) % ni];
     const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
@@ -407,12 +471,19 @@ void Engine::process_pair(int ia, int ib) {
     if (hi - lo <= 1e-9 * ref_length) return;
     const double g1 = (q1 - r1).dot(normal), g2 = (q2 - r1).dot(normal);
     const double spacing = (hi - lo) / (points_ - 1);
-    for (int k = 0; k < points_; ++k) {
-      const double s = lo + k * spacing;
-      const double u = (s - s1) / (s2 - s1);
-      s_nodes.push_back(s);
-      gaps.push_back(g1 + u * (g2 - g1));
-      lengths.push_back((k == 0 || k == points_ - 1) ? 0.5 * spacing : spacing);
+    if (reference_path_) {
+      s_nodes.clear();
+      gaps.clear();
+      lengths.clear();
+      for (int k = 0; k < points_; ++k) {
+        const double s = lo + k * spacing;
+        const double u = (s - s1) / (s2 - s1);
+        s_nodes.push_back(s);
+        gaps.push_back(g1 + u * (g2 - g1));
+        lengths.push_back((k == 0 || k == points_ - 1) ? 0.5 * spacing : spacing);
+      }
+    } else {
+      edge_nodes(lo, spacing, s1, s2, g1, g2);
     }
   } else {
     // Corner against face: the deepest vertex of the incident polygon, if it lies over the face.
@@ -429,19 +500,22 @@ void Engine::process_pair(int ia, int ib) {
     if (s < 0 || s > ref_length) return;
     const double shorter = std::min((inc.world[(deepest + 1) % ni] - inc.world[deepest]).norm(),
                                     (inc.world[(deepest + ni - 1) % ni] - inc.world[deepest]).norm());
-    s_nodes.push_back(s);
-    gaps.push_back(depth);
-    lengths.push_back(shorter / (2.0 * (points_ - 1)));
+    s_nodes.assign(1, s);
+    gaps.assign(1, depth);
+    lengths.assign(1, shorter / (2.0 * (points_ - 1)));
   }
 
   const Vec2 normal_ab = ref_on_a ? normal : Vec2(-normal);
   const Vec2 tangent_ab = perp(normal_ab);
-  if (it == contacts_.end()) {
+  if (existing == nullptr) {
     Contact c;
+    c.key = key;
     c.group = group_for(a, b, normal_ab);
-    it = contacts_.emplace(key, std::move(c)).first;
+    contact_index = static_cast<int>(contacts_.size());
+    contact_index_.emplace(key, contact_index);
+    contacts_.push_back(std::move(c));
   }
-  Contact& contact = it->second;
+  Contact& contact = contacts_[contact_index];
   const int count = static_cast<int>(s_nodes.size());
   const GroupLaw& group = groups_[contact.group];
   if (!contact.active || contact.corner != !edge_contact || static_cast<int>(contact.shear.size()) != count) {
@@ -454,7 +528,7 @@ void Engine::process_pair(int ia, int ib) {
   contact.seen = true;
   contact.corner = !edge_contact;
   contact.ref_on_a = ref_on_a;
-  contact.gap.resize(count);
+  if (static_cast<int>(contact.gap.size()) != count) contact.gap.resize(count);
 
   if (!group.plain || (has_gap_ && key == gap_key_)) {
     const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, has_gap_ && key == gap_key_};
@@ -462,14 +536,111 @@ void Engine::process_pair(int ia, int ib) {
     return;
   }
   // The plain law: every joint group without effects, exactly as the engine was before them.
-  const MohrCoulombLaw& law = group.law;
+  const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, false};
+  if (reference_path_)
+    process_plain_nodes_scalar(a, b, contact, group.law, layout, s_nodes, gaps, lengths);
+  else
+    process_plain_nodes(a, b, contact, group.law, layout, s_nodes, gaps, lengths);
+}
+
+// Edge-contact nodes: `points_` nodes spaced evenly over [lo, lo + (points_ - 1) spacing] of the
+// reference face, their gaps interpolated linearly between the incident edge's ends (s1, g1) and
+// (s2, g2), and their tributary lengths (half a spacing at the two ends). Indexed writes into
+// arrays that keep their size from step to step (no allocation, no push_back bookkeeping), so the
+// loop vectorises; the arithmetic per node is the scalar form's, operation for operation.
+void Engine::edge_nodes(double lo, double spacing, double s1, double s2, double g1, double g2) {
+  const int n = points_;
+  if (static_cast<int>(node_s_.size()) != n) {  // after a corner contact (one node)
+    node_s_.resize(n);
+    node_gap_.resize(n);
+    node_length_.resize(n);
+  }
+  double* __restrict s = node_s_.data();
+  double* __restrict gap = node_gap_.data();
+  double* __restrict length = node_length_.data();
+  for (int k = 0; k < n; ++k) {
+    s[k] = lo + k * spacing;
+    const double u = (s[k] - s1) / (s2 - s1);
+    gap[k] = g1 + u * (g2 - g1);
+    length[k] = spacing;
+  }
+  length[0] = 0.5 * spacing;
+  length[n - 1] = 0.5 * spacing;
+}
+
+// The plain law's node loop in two stages.
+// Stage 1 (vectorised): the kinematics of every node into structure-of-arrays scratch: position
+// x/y, penetration, tributary area and shear increment along tangent_ab. It replaces, per node,
+//   point = r1 + s tr + 0.5 gap normal;  kin.shear_increment = (v_b(point) - v_a(point)) . t dt
+// written out component by component in the same order of operations (bit-identical results).
+// Stage 2 (scalar): the Mohr-Coulomb law with its per-node shear memory and the pair's resultant,
+// summed in node order as before (a floating-point sum cannot be reordered without changing bits).
+void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                 const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                 const std::vector<double>& gaps, const std::vector<double>& lengths) {
+  const int count = static_cast<int>(s_nodes.size());  // at most points_, the scratch's size
+  const double* gap = gaps.data();
+  const double* length = lengths.data();
+  const double* px = soa_x_.data();
+  const double* py = soa_y_.data();
+  const double* area = soa_area_.data();
+  const double* increment = soa_increment_.data();
+  const NodeFrame frame{layout.r1.x(), layout.r1.y(), layout.tr.x(), layout.tr.y(), layout.normal.x(),
+                        layout.normal.y(), layout.tangent_ab.x(), layout.tangent_ab.y(), a.velocity.x(),
+                        a.velocity.y(), a.angular_velocity, a.position.x(), a.position.y(), b.velocity.x(),
+                        b.velocity.y(), b.angular_velocity, b.position.x(), b.position.y(), scene_.width, dt_};
+  node_kinematics(count, frame, s_nodes.data(), gap, length, soa_x_.data(), soa_y_.data(), soa_area_.data(),
+                  soa_increment_.data());
+
   double slip_weighted = 0, length_total = 0;
   bool touching = false;
   // The pair's resultant: force on b and its moment about the origin, applied once at the end.
+  double fx = 0, fy = 0, moment = 0;
+  const double nabx = layout.normal_ab.x(), naby = layout.normal_ab.y();
+  for (int k = 0; k < count; ++k) {
+    // Nodes are stored in the order of increasing coordinate along tangent_ab.
+    const int slot = layout.ref_on_a ? k : count - 1 - k;
+    contact.gap[slot] = gap[k];
+    NodeKinematics kin;
+    kin.penetration = -gap[k];
+    kin.area = area[k];
+    kin.shear_increment = increment[k];
+    const NodeForces f = law.evaluate(kin, contact.shear[slot]);
+    if (f.normal == 0) continue;
+    touching = true;
+    const double force_x = f.normal * nabx + f.shear * frame.tx, force_y = f.normal * naby + f.shear * frame.ty;
+    fx += force_x;
+    fy += force_y;
+    moment += px[k] * force_y - py[k] * force_x;
+    slip_weighted += f.plastic_slip * length[k];
+    length_total += length[k];
+  }
+  node_updates_ += count;
+  if (touching) {
+    const Vec2 resultant(fx, fy);
+    b.force += resultant;
+    b.torque += moment - cross(b.position, resultant);
+    a.force -= resultant;
+    a.torque -= moment - cross(a.position, resultant);
+  }
+  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
+  if (touching && loading_stage_) contact.ever_touched = true;
+}
+
+// The plain law's node loop as the engine ran it before the two-stage form above, one node at a
+// time; selected with DEMCAL_ENGINE_PATH=reference for comparisons.
+void Engine::process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                        const NodeLayout& layout, const std::vector<double>& s_nodes,
+                                        const std::vector<double>& gaps, const std::vector<double>& lengths) {
+  const int count = static_cast<int>(s_nodes.size());
+  const Vec2 r1 = layout.r1, tr = layout.tr, normal = layout.normal;
+  const Vec2 normal_ab = layout.normal_ab, tangent_ab = layout.tangent_ab;
+  const bool ref_on_a = layout.ref_on_a;
+  double slip_weighted = 0, length_total = 0;
+  bool touching = false;
   Vec2 resultant = Vec2::Zero();
   double moment = 0;
   for (int k = 0; k < count; ++k) {
-    // Nodes are stored in the order of increasing coordinate along tangent_ab.
     const int slot = ref_on_a ? k : count - 1 - k;
     const double gap = gaps[k];
     contact.gap[slot] = gap;
@@ -594,10 +765,26 @@ void Engine::compute_forces() {
     }
   }
   std::sort(pairs_.begin(), pairs_.end());
-  for (auto& [key, c] : contacts_) c.seen = false;
-  for (const auto& [i, j] : pairs_) process_pair(i, j);
+  // Each pair's contact: found in the previous step's list by a merge (both sorted by key), or by a
+  // hash look-up for a pair new to the broad phase (the reference path looks up every pair).
+  pair_contacts_.clear();
+  std::size_t previous = 0;
+  for (const auto& [i, j] : pairs_) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
+    int index = -1;
+    while (previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first < key) ++previous;
+    if (!reference_path_ && previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first == key) {
+      index = previous_pair_contacts_[previous].second;
+    } else if (const auto found = contact_index_.find(key); found != contact_index_.end()) {
+      index = found->second;
+    }
+    pair_contacts_.emplace_back(key, index);
+  }
+  for (Contact& c : contacts_) c.seen = false;
+  for (std::size_t p = 0; p < pairs_.size(); ++p) process_pair(pairs_[p].first, pairs_[p].second, pair_contacts_[p].second);
+  std::swap(pair_contacts_, previous_pair_contacts_);
   first_step_ = false;
-  for (auto& [key, c] : contacts_) {
+  for (Contact& c : contacts_) {
     c.active = c.seen;
     if (!c.active) std::fill(c.gap.begin(), c.gap.end(), std::numeric_limits<double>::infinity());
   }
@@ -784,7 +971,7 @@ void Engine::finish(Recording& rec) const {
     rec.final_blocks.push_back(std::move(s));
   }
   std::vector<std::pair<std::uint64_t, const Contact*>> sorted;
-  for (const auto& [key, c] : contacts_) sorted.emplace_back(key, &c);
+  for (const Contact& c : contacts_) sorted.emplace_back(c.key, &c);
   std::sort(sorted.begin(), sorted.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
   for (const auto& [key, c] : sorted) {
     const int ia = static_cast<int>(key >> 32), ib = static_cast<int>(key & 0xffffffffu);
