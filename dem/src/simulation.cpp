@@ -194,6 +194,10 @@ class Engine {
   void process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
                                   const NodeLayout& layout, const std::vector<double>& s_nodes,
                                   const std::vector<double>& gaps, const std::vector<double>& lengths);
+  // Ends every node loop: the pair's summed node force (on b; its opposite on a) and its moment about
+  // the origin go to both blocks, and while loading the joint's mean slip and first touch are kept.
+  void apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, const Vec2& resultant, double moment,
+                       double slip_weighted, double length_total);
   void integrate();
   double unbalanced_ratio() const;
   double actuator_force() const;
@@ -616,8 +620,12 @@ void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrC
     length_total += length[k];
   }
   node_updates_ += count;
+  apply_pair_sums(a, b, contact, touching, Vec2(fx, fy), moment, slip_weighted, length_total);
+}
+
+void Engine::apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, const Vec2& resultant, double moment,
+                             double slip_weighted, double length_total) {
   if (touching) {
-    const Vec2 resultant(fx, fy);
     b.force += resultant;
     b.torque += moment - cross(b.position, resultant);
     a.force -= resultant;
@@ -659,14 +667,7 @@ void Engine::process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, cons
     slip_weighted += f.plastic_slip * lengths[k];
     length_total += lengths[k];
   }
-  if (touching) {
-    b.force += resultant;
-    b.torque += moment - cross(b.position, resultant);
-    a.force -= resultant;
-    a.torque -= moment - cross(a.position, resultant);
-  }
-  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
-  if (touching && loading_stage_) contact.ever_touched = true;
+  apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
 }
 
 // The node loop of a joint group with effects on (EffectLaw and its node history), or of the gap
@@ -712,14 +713,7 @@ void Engine::process_nodes_with_effects(Body& a, Body& b, Contact& contact, cons
     slip_weighted += f.plastic_slip * lengths[k];
     length_total += lengths[k];
   }
-  if (touching) {
-    b.force += resultant;
-    b.torque += moment - cross(b.position, resultant);
-    a.force -= resultant;
-    a.torque -= moment - cross(a.position, resultant);
-  }
-  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
-  if (touching && loading_stage_) contact.ever_touched = true;
+  apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
 }
 
 void Engine::compute_forces() {
