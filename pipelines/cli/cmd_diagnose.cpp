@@ -20,7 +20,7 @@ struct DiagnoseFlags {
   int candidates = 3;
   int candidate_simulations = 0;
   double evidence = 10;
-  std::string candidate_algorithm = "nlopt:LN_SBPLX";
+  std::string candidate_algorithm = "bo";
   bool resume = false, no_report = false, quiet = false;
 };
 
@@ -66,7 +66,7 @@ void setup(CLI::App& app) {
   sub->add_option("--candidates", flags->candidates, "Effects calibrated at most, best signature first");
   sub->add_option("--candidate-simulations", flags->candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");
   sub->add_option("--candidate-algorithm", flags->candidate_algorithm,
-                  "Optimiser of each candidate: nlopt:NAME (local, warm-started) or tbpso | pso | ga");
+                  "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
   sub->add_option("--evidence", flags->evidence, "Criterion fall needed to accept an effect");
   sub->add_flag("--resume", flags->resume, "Continue interrupted calibrations from their archives");
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");

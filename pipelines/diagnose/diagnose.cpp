@@ -158,6 +158,13 @@ std::vector<double> stacked(const std::vector<ChannelResidual>& base, const std:
 
 // ---- stage 1: the base fit ---------------------------------------------------------------------
 
+// Every calibration of a diagnosis shares one archive, so that the refinement's surrogate starts
+// from the base calibration's runs (same scene hash and objective); the extended models have scene
+// hashes of their own.
+std::string diagnosis_archive(const DiagnoseOptions& options) {
+  return (fs::path(options.output) / "archive.sqlite").string();
+}
+
 std::map<std::string, double> base_fit(const CampaignConfig& config, const DiagnoseOptions& options, Stage& stage,
                                        double* fitness) {
   if (!options.base_result.empty()) {
@@ -174,7 +181,7 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
   }
   CampaignConfig base = config;
   base.output = (fs::path(options.output) / "base").string();
-  base.archive.clear();
+  base.archive = diagnosis_archive(options);
   base.report = options.report;
   if (options.max_simulations > 0)
     base.optimiser.max_evaluations = std::min(base.optimiser.evaluation_budget(), options.max_simulations / 2);
@@ -372,7 +379,7 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   c.space = space;
   c.name = config.name + "+" + folder.filename().string();
   c.output = folder.string();
-  c.archive.clear();
+  c.archive = diagnosis_archive(options);
   c.report = options.report;
   c.optimiser.max_evaluations = evaluations;
   c.optimiser.algorithm = options.candidate_algorithm;

@@ -12,9 +12,10 @@
 //                    signature, with a non-negative weight, can: the ranking decides which effects
 //                    are calibrated at all when the budget is short, and in which order;
 //   4. extension     each tried effect: a calibration of the base parameters (bounds narrowed
-//                    around B, if asked) plus the effect's parameters, warm-started from B with the
-//                    effect at its probe closest to the measurement, through run_campaign (archive, backends, report), in
-//                    <out>/candidates/<effect>/;
+//                    around B, if asked) plus the effect's parameters through run_campaign
+//                    (archive, backends, surrogate, report), in <out>/candidates/<effect>/: by
+//                    Bayesian optimisation on the surrogate (default), or a local search started
+//                    from B with the effect at its probe closest to the measurement;
 //   5. selection     the change of an information criterion with the effective number of
 //                    independent points (the residual is autocorrelated): accepted when it falls
 //                    by more than `evidence_threshold`; "no effect needed" when none is accepted or
@@ -132,11 +133,13 @@ struct DiagnoseOptions {
   // that compensate for a missing effect can lie far from where the extended model needs them.
   double narrow_log_factor = 0;
   double narrow_linear_share = 0;
-  // Optimiser of each candidate calibration. An NLopt local algorithm ("nlopt:LN_SBPLX") starts
-  // from the base best with the effect at the probe closest to the measurement (a warm
-  // start; its first step `candidate_initial_step` in unit-cube lengths, in (0, 0.5]); a swarm
-  // ("tbpso", "pso", "ga") searches the narrowed box with the campaign's population and polish.
-  std::string candidate_algorithm = "nlopt:LN_SBPLX";
+  // Optimiser of each candidate calibration (and of the base refinement). "bo" (the default):
+  // Bayesian optimisation on the surrogate, which measured best on friction softening (docs/diagnose.md);
+  // an NLopt local algorithm ("nlopt:LN_SBPLX") starts from the base best with the effect at the
+  // probe closest to the measurement (a warm start; its first step `candidate_initial_step` in
+  // unit-cube lengths, in (0, 0.5]); a swarm ("tbpso", "pso", "ga") searches the box with the
+  // campaign's population and polish.
+  std::string candidate_algorithm = "bo";
   double candidate_initial_step = 0.1;
   bool resume = false;                    // continue the base and candidate campaigns from their archives
   bool progress = true;                   // progress lines on stderr
