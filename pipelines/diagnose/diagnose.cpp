@@ -538,12 +538,16 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   d.base_params = base_fit(config, options, stage, &d.base_fitness);
   const long per_candidate = options.candidate_evaluations > 0 ? options.candidate_evaluations
                                                                 : config.optimiser.evaluation_budget();
-  {
+  // Within a total budget the refinement takes at most a quarter of what the base fit left.
+  const long refine_budget = options.max_simulations > 0
+                                 ? std::min(per_candidate, (options.max_simulations - stage.simulations()) / 4)
+                                 : per_candidate;
+  if (refine_budget >= 2 * config.optimiser.population) {
     ExtendedModel plain;
     plain.config = config;
     const fs::path folder = fs::path(options.output) / "base-refined";
-    const CampaignConfig refine = extended_campaign(plain, config, d.base_params, options, per_candidate, folder, d.base_params);
-    progress(options, "refining the base fit (" + std::to_string(per_candidate) + " simulations) in " + folder.string());
+    const CampaignConfig refine = extended_campaign(plain, config, d.base_params, options, refine_budget, folder, d.base_params);
+    progress(options, "refining the base fit (" + std::to_string(refine_budget) + " simulations) in " + folder.string());
     RunOptions run;
     run.resume = options.resume;
     run.progress = options.progress;

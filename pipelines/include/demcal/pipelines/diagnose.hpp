@@ -119,9 +119,11 @@ struct DiagnoseOptions {
   std::string output = "diagnosis";       // folder: diagnosis.json, report.md, base/, candidates/
   std::vector<std::string> effects;       // effect names to consider; empty = every registered effect
   std::string base_result;                // a finished base calibration's folder (its result.json); "" = run one
-  long max_simulations = 0;               // budget of the whole diagnosis (base calibration included
-                                          // when it runs); 0 = the campaign's budget for the base and
-                                          // `candidate_evaluations` for each candidate
+  // Budget of the diagnosis's calibrations: the base (at most half, when it runs), the refinement
+  // (at most a quarter of the rest) and the candidates, each cut to what is left; the signature
+  // probes (2P + 1 runs per effect and target, one per base parameter) come on top. 0 = the
+  // campaign's budget for the base and `candidate_evaluations` for each of the others.
+  long max_simulations = 0;
   int max_candidates = 3;                 // effects calibrated at most, best signature first, >= 1
   int candidate_evaluations = 0;          // simulations per candidate calibration; 0 = the campaign's
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
