@@ -87,9 +87,10 @@ struct Evaluation {
   double error = Diagnosis::kNaN;
 };
 
-class Stage {
+// Simulates parameter sets on the campaign's cases and counts the runs.
+class CaseRunner {
  public:
-  Stage(const CampaignConfig& config, const DiagnoseOptions& options) : config_(config), options_(options) {
+  explicit CaseRunner(const CampaignConfig& config) {
     for (const auto& c : config.cases) measured_.push_back(load_measured(c.measured));
   }
 
@@ -137,8 +138,6 @@ class Stage {
   void add_simulations(long n) { simulations_ += n; }
 
  private:
-  const CampaignConfig& config_;
-  const DiagnoseOptions& options_;
   std::vector<smoothing::Curve> measured_;
   long simulations_ = 0;
 };
@@ -165,7 +164,7 @@ std::string diagnosis_archive(const DiagnoseOptions& options) {
   return (fs::path(options.output) / "archive.sqlite").string();
 }
 
-std::map<std::string, double> base_fit(const CampaignConfig& config, const DiagnoseOptions& options, Stage& stage,
+std::map<std::string, double> base_fit(const CampaignConfig& config, const DiagnoseOptions& options, CaseRunner& runner,
                                        double* fitness) {
   if (!options.base_result.empty()) {
     fs::path result = options.base_result;
@@ -191,7 +190,7 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
   run.resume = options.resume;
   run.progress = options.progress;
   const CampaignResult result = run_campaign(base, run);
-  stage.add_simulations(result.simulated_this_session);
+  runner.add_simulations(result.simulated_this_session);
   if (result.status != CampaignStatus::completed || result.best.params.empty())
     throw CampaignError("the base calibration failed: " + result.message);
   *fitness = result.best.fitness;
@@ -297,7 +296,7 @@ std::vector<std::vector<double>> probe_points(std::size_t parameters) {
 // Sensitivity of the stacked curves to each free base parameter: one forward difference of 5 % of
 // the unit cube (backwards at the upper bound).
 std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config, const std::map<std::string, double>& best,
-                                                    const std::vector<ChannelResidual>& base, Stage& stage) {
+                                                    const std::vector<ChannelResidual>& base, CaseRunner& runner) {
   std::vector<std::vector<double>> columns;
   const auto& space = config.space;
   const auto names = space.free_names();
@@ -310,7 +309,7 @@ std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config
     u(jj) += u(jj) + 0.05 <= 1 ? 0.05 : -0.05;
     std::map<std::string, double> params = best;
     params[names[j]] = space.to_physical(u)(jj);
-    const Evaluation e = stage.evaluate(config, complete_parameters(config, params), &base);
+    const Evaluation e = runner.evaluate(config, complete_parameters(config, params), &base);
     if (e.ok) columns.push_back(stacked(base, &e.residuals));
   }
   return columns;
@@ -530,17 +529,17 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   config.Validate();
   options.Validate();
   fs::create_directories(options.output);
-  Stage stage(config, options);
+  CaseRunner runner(config);
   Diagnosis d;
 
-  // 1. base fit, then the same local search the candidates get, on the base parameters alone: an
+  // 1. base fit, then the same search the candidates get, on the base parameters alone: an
   // effect must beat the best the base model can do with that search, not a less refined fit.
-  d.base_params = base_fit(config, options, stage, &d.base_fitness);
+  d.base_params = base_fit(config, options, runner, &d.base_fitness);
   const long per_candidate = options.candidate_evaluations > 0 ? options.candidate_evaluations
                                                                 : config.optimiser.evaluation_budget();
   // Within a total budget the refinement takes at most a quarter of what the base fit left.
   const long refine_budget = options.max_simulations > 0
-                                 ? std::min(per_candidate, (options.max_simulations - stage.simulations()) / 4)
+                                 ? std::min(per_candidate, (options.max_simulations - runner.simulations()) / 4)
                                  : per_candidate;
   if (refine_budget >= 2 * config.optimiser.population) {
     ExtendedModel plain;
@@ -552,7 +551,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     run.resume = options.resume;
     run.progress = options.progress;
     const CampaignResult r = run_campaign(refine, run);
-    stage.add_simulations(r.simulated_this_session);
+    runner.add_simulations(r.simulated_this_session);
     if (r.status == CampaignStatus::completed && std::isfinite(r.best.fitness) &&
         (!std::isfinite(d.base_fitness) || r.best.fitness < d.base_fitness)) {
       d.base_params = r.best.params;
@@ -562,7 +561,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   const auto base_params = complete_parameters(config, d.base_params);
 
   // 2. residual
-  const Evaluation base = stage.evaluate(config, base_params);
+  const Evaluation base = runner.evaluate(config, base_params);
   if (!base.ok) throw CampaignError("the base best set cannot be simulated: " + base.message);
   d.base_residuals = base.residuals;
   for (const auto& c : base.residuals) {
@@ -591,7 +590,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   } else {
     // 3. signatures
     const auto residual = stacked(base.residuals, nullptr);
-    const auto sensitivities = base_sensitivities(config, base_params, base.residuals, stage);
+    const auto sensitivities = base_sensitivities(config, base_params, base.residuals, runner);
     std::map<std::string, ExtendedModel> models;
     std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> best probe's parameters
     const dem::Scene first_scene = build_scene(config.cases.front().scene, config.source + ": cases[0].scene");
@@ -617,7 +616,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         double warm_error = std::numeric_limits<double>::infinity();
         for (const auto& t : probe_points(m.parameter_names.size())) {
           const auto values = effect_values(m, base_params, t);
-          const Evaluation s = stage.evaluate(m.config, values, &base.residuals);
+          const Evaluation s = runner.evaluate(m.config, values, &base.residuals);
           if (!s.ok) continue;
           signatures.push_back(stacked(base.residuals, &s.residuals));
           if (s.error < warm_error) {
@@ -654,7 +653,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         continue;
       }
       long budget = per_candidate;
-      if (options.max_simulations > 0) budget = std::min(budget, options.max_simulations - stage.simulations() - 1);
+      if (options.max_simulations > 0) budget = std::min(budget, options.max_simulations - runner.simulations() - 1);
       if (budget < 2 * config.optimiser.population) {
         c.reason = "over the simulation budget";
         continue;
@@ -670,11 +669,11 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       run.progress = options.progress;
       try {
         const CampaignResult r = run_campaign(ext, run);
-        stage.add_simulations(r.simulated_this_session);
+        runner.add_simulations(r.simulated_this_session);
         c.simulations = r.simulated_this_session;
         c.params = r.best.params;
         c.fitness = r.best.fitness;
-        const Evaluation e = stage.evaluate(ext, complete_parameters(ext, r.best.params), &base.residuals);
+        const Evaluation e = runner.evaluate(ext, complete_parameters(ext, r.best.params), &base.residuals);
         if (!e.ok) {
           c.reason = "its best set cannot be re-simulated: " + e.message;
           continue;
@@ -697,7 +696,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   } else {
     select(d, options);
   }
-  d.simulations = stage.simulations();
+  d.simulations = runner.simulations();
   d.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   {
     std::ofstream out(fs::path(options.output) / "diagnosis.json");
