@@ -396,7 +396,8 @@ constexpr const char* kRunColumns =
     "SELECT id, model_hash, param_key, code_version, backend, status, message, wall_time_s,"
     " curve_columns, curve_units, curve_data, details_json, created_at FROM runs ";
 
-RunRecord read_run(const Statement& s, const std::string& path) {
+// The first eight columns of kRunColumns, which every run query starts with.
+RunRecord read_run_header(const Statement& s) {
   RunRecord run;
   run.id = s.integer(0);
   run.model_hash = s.text(1);
@@ -406,6 +407,11 @@ RunRecord read_run(const Statement& s, const std::string& path) {
   run.status = s.text(5);
   run.message = s.text(6);
   run.wall_time_s = s.real(7);
+  return run;
+}
+
+RunRecord read_run(const Statement& s, const std::string& path) {
+  RunRecord run = read_run_header(s);
   run.curves = unpack_curve(json_strings(s.text(8)), json_strings(s.text(9)), s.blob(10),
                             path + ": run " + std::to_string(run.id));
   run.details = nlohmann::json::parse(s.text(11));
@@ -450,15 +456,7 @@ std::vector<RunRecord> RunArchive::runs_with_status(const std::string& status) c
   s.bind(1, status);
   std::vector<RunRecord> out;
   while (s.step()) {
-    RunRecord run;
-    run.id = s.integer(0);
-    run.model_hash = s.text(1);
-    run.params = params_from_key(s.text(2));
-    run.code_version = s.text(3);
-    run.backend = s.text(4);
-    run.status = s.text(5);
-    run.message = s.text(6);
-    run.wall_time_s = s.real(7);
+    RunRecord run = read_run_header(s);
     run.details = nlohmann::json::parse(s.text(8));
     run.created_at = s.text(9);
     out.push_back(std::move(run));
