@@ -315,7 +315,15 @@ TEST(Campaign, MpiBackendGivesTheThreadsResult) {
   ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
   const auto threads = run({}, "threads", "threads");
   ASSERT_TRUE(threads.ok()) << threads.message;
-  const auto mpi = run({"mpirun", "--oversubscribe", "-n", "3"}, "mpi", "mpi");
+  std::vector<std::string> mpirun = {"mpirun", "--oversubscribe", "-n", "3"};
+#ifdef DEMCAL_SANITIZED
+  // OpenMPI's start-up allocations live until exit; LeakSanitizer is told to skip them by library
+  // name, which needs the slow unwinder to see those frames (tests/sanitize/openmpi-lsan.supp).
+  const char* outer = std::getenv("ASAN_OPTIONS");
+  mpirun.insert(mpirun.end(), {"-x", std::string("ASAN_OPTIONS=") + (outer ? std::string(outer) + ":" : "") + "fast_unwind_on_malloc=0",
+                               "-x", "LSAN_OPTIONS=suppressions=" + std::string(DEMCAL_SOURCE_DIR) + "/tests/sanitize/openmpi-lsan.supp"});
+#endif
+  const auto mpi = run(mpirun, "mpi", "mpi");
   ASSERT_TRUE(mpi.ok()) << mpi.message;
   auto comparable = [](json j) {
     j.erase("wall_time_s");
