@@ -15,6 +15,7 @@ struct DiagnoseFlags {
   std::string campaign_file;
   std::string out = "diagnosis";
   std::string effects = "all";
+  std::string held_out;
   std::string result;
   long max_simulations = 0;
   int candidates = 3;
@@ -24,7 +25,8 @@ struct DiagnoseFlags {
   bool resume = false, no_report = false, quiet = false;
 };
 
-std::vector<std::string> split_effects(const std::string& text) {
+// Names separated by commas; "all" or "" = none (every effect, for --effects).
+std::vector<std::string> split_names(const std::string& text) {
   std::vector<std::string> names;
   if (text == "all" || text.empty()) return names;
   std::stringstream s(text);
@@ -38,7 +40,8 @@ void run(const DiagnoseFlags& f) {
   const CampaignConfig config = load_campaign(f.campaign_file);
   DiagnoseOptions o;
   o.output = f.out;
-  o.effects = split_effects(f.effects);
+  o.effects = split_names(f.effects);
+  o.held_out_cases = split_names(f.held_out);
   o.base_result = f.result;
   o.max_simulations = f.max_simulations;
   o.max_candidates = f.candidates;
@@ -62,6 +65,8 @@ void setup(CLI::App& app) {
   sub->add_option("--out", flags->out, "Output folder (diagnosis.json, report.md, base/, candidates/)");
   sub->add_option("--effects", flags->effects, "all, or effect names separated by commas (joint-closure,friction-softening,...)");
   sub->add_option("--result", flags->result, "Reuse a finished base calibration (its folder or result.json)");
+  sub->add_option("--held-out", flags->held_out,
+                  "Cases of the campaign, separated by commas, left out of every fit and used to check the fits");
   sub->add_option("--max-simulations", flags->max_simulations, "Budget of the whole diagnosis (0 = the campaign's per calibration)");
   sub->add_option("--candidates", flags->candidates, "Effects calibrated at most, best signature first");
   sub->add_option("--candidate-simulations", flags->candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");

@@ -32,6 +32,7 @@ void DiagnoseOptions::Validate() const {
   if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
+  if (!(held_out_tolerance >= 0)) fail("held_out_tolerance", std::to_string(held_out_tolerance), "must be >= 0");
   if (candidate_algorithm.empty()) fail("candidate_algorithm", "\"\"", "must name an optimiser");
   if (!(candidate_initial_step > 0 && candidate_initial_step <= 0.5))
     fail("candidate_initial_step", std::to_string(candidate_initial_step), "must be in (0, 0.5]");
@@ -84,13 +85,16 @@ struct Evaluation {
   std::string message;
   std::vector<CasePrediction> cases;
   std::vector<ChannelResidual> residuals;  // per case and channel, on the base grid when one is given
+  std::vector<ChannelResidual> held_out;   // channels of weight 0 and of held-out cases, not fitted
   double error = Diagnosis::kNaN;
+  double held_out_error = Diagnosis::kNaN;
 };
 
 // Simulates parameter sets on the campaign's cases and counts the runs.
 class CaseRunner {
  public:
-  explicit CaseRunner(const CampaignConfig& config) {
+  CaseRunner(const CampaignConfig& config, const std::vector<std::string>& held_out_cases)
+      : held_out_cases_(held_out_cases) {
     for (const auto& c : config.cases) measured_.push_back(load_measured(c.measured));
   }
 
@@ -109,10 +113,24 @@ class CaseRunner {
         return e;
       }
       const auto channels = smoothing::common_channels(measured_[k], p.simulated, config.objective_options);
+      const bool case_held_out =
+          std::find(held_out_cases_.begin(), held_out_cases_.end(), p.name) != held_out_cases_.end();
       for (const auto& ch : channels) {
         const auto weight = config.objective_options.channel_weights.find(ch);
-        if (weight != config.objective_options.channel_weights.end() && weight->second == 0) continue;  // not fitted
         const auto sim = smoothing::series(p.simulated, ch, config.objective_options.force_column);
+        if (case_held_out || (weight != config.objective_options.channel_weights.end() && weight->second == 0)) {
+          // not fitted: a check of the fit, on its own grid
+          try {
+            ChannelResidual r = analyse_channel(smoothing::series(measured_[k], ch, config.objective_options.force_column),
+                                                sim, config.objective_options.points);
+            r.case_name = p.name;
+            r.channel = ch;
+            e.held_out.push_back(std::move(r));
+          } catch (const smoothing::CurveError&) {
+            // a held-out channel the simulation does not reach is left out of the check
+          }
+          continue;
+        }
         ChannelResidual r;
         if (grid) {
           if (g >= grid->size()) {
@@ -131,6 +149,7 @@ class CaseRunner {
     }
     e.ok = true;
     e.error = overall_error(e.residuals);
+    if (!e.held_out.empty()) e.held_out_error = overall_error(e.held_out);
     return e;
   }
 
@@ -139,6 +158,7 @@ class CaseRunner {
 
  private:
   std::vector<smoothing::Curve> measured_;
+  std::vector<std::string> held_out_cases_;
   long simulations_ = 0;
 };
 
@@ -164,6 +184,14 @@ std::string diagnosis_archive(const DiagnoseOptions& options) {
   return (fs::path(options.output) / "archive.sqlite").string();
 }
 
+// The campaign without its held-out cases: what every calibration of the diagnosis fits.
+CampaignConfig fitted_cases(CampaignConfig config, const DiagnoseOptions& options) {
+  std::erase_if(config.cases, [&](const CaseSpec& c) {
+    return std::find(options.held_out_cases.begin(), options.held_out_cases.end(), c.name) != options.held_out_cases.end();
+  });
+  return config;
+}
+
 std::map<std::string, double> base_fit(const CampaignConfig& config, const DiagnoseOptions& options, CaseRunner& runner,
                                        double* fitness) {
   if (!options.base_result.empty()) {
@@ -178,7 +206,7 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
                    : Diagnosis::kNaN;
     return params;
   }
-  CampaignConfig base = config;
+  CampaignConfig base = fitted_cases(config, options);
   base.output = (fs::path(options.output) / "base").string();
   base.archive = diagnosis_archive(options);
   base.report = options.report;
@@ -341,7 +369,7 @@ std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, con
 CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
                                  const std::map<std::string, double>& best, const DiagnoseOptions& options,
                                  long evaluations, const fs::path& folder, const std::map<std::string, double>& warm) {
-  CampaignConfig c = m.config;
+  CampaignConfig c = fitted_cases(m.config, options);
   std::map<std::string, double> narrowed_lower;  // residual friction stays below the lowest friction searched
   optimise::ParameterSpace space;
   for (const auto& p : config.space.free_parameters()) {
@@ -462,7 +490,14 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
       c.verdict = "rejected";
       if (c.reason.empty()) c.reason = "no usable fit";
     } else if (c.score < -options.evidence_threshold && c.error < d.error_before) {
-      accepted.push_back(&c);
+      if (spoils_held_out_data(c, d, options)) {
+        c.verdict = "rejected";
+        c.reason = "fits the calibrated curves (criterion change " + format_number(c.score) +
+                   ") but spoils the data it was not fitted to: held-out error " + format_number(d.held_out_error) +
+                   " -> " + format_number(c.held_out_error) + " N";
+      } else {
+        accepted.push_back(&c);
+      }
     } else {
       c.verdict = "rejected";
       c.reason = "the fit does not improve enough for its extra parameters (criterion change " +
@@ -486,6 +521,8 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
     c->verdict = "accepted";
     c->reason = "criterion change " + format_number(c->score) + "; error " + format_number(d.error_before) + " -> " +
                 format_number(c->error) + " N";
+    if (std::isfinite(d.held_out_error))
+      c->reason += "; on data not fitted " + format_number(d.held_out_error) + " -> " + format_number(c->held_out_error) + " N";
     d.chosen = {c->effect};
     d.error_after = c->error;
     d.verdict = "The base model misses one effect: " + finding(*c, d.base_params) + ". Adding " + c->effect +
@@ -524,12 +561,27 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   return r;
 }
 
+bool spoils_held_out_data(const EffectCandidate& c, const Diagnosis& d, const DiagnoseOptions& options) {
+  if (!std::isfinite(d.held_out_error)) return false;  // no held-out data
+  if (!std::isfinite(c.held_out_error)) return true;   // the fit no longer reaches it
+  double noise = 0;
+  for (const auto& [key, n] : d.held_out_noise)
+    if (std::isfinite(n)) noise += n * n;
+  noise = d.held_out_noise.empty() ? 0 : std::sqrt(noise / static_cast<double>(d.held_out_noise.size()));
+  return c.held_out_error > d.held_out_error + std::max(noise, options.held_out_tolerance * d.held_out_error);
+}
+
 Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   config.Validate();
   options.Validate();
+  for (const auto& name : options.held_out_cases)
+    if (std::none_of(config.cases.begin(), config.cases.end(), [&](const CaseSpec& c) { return c.name == name; }))
+      throw CampaignError("--held-out: the campaign has no case named '" + name + "'");
+  if (fitted_cases(config, options).cases.empty())
+    throw CampaignError("--held-out: every case of the campaign is held out, nothing is left to fit");
   fs::create_directories(options.output);
-  CaseRunner runner(config);
+  CaseRunner runner(config, options.held_out_cases);
   Diagnosis d;
 
   // 1. base fit, then the same search the candidates get, on the base parameters alone: an
@@ -569,6 +621,11 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     d.noise[key_of(c)] = c.noise;
   }
   d.error_before = base.error;
+  for (const auto& c : base.held_out) {
+    d.held_out_rms[key_of(c)] = c.rms;
+    d.held_out_noise[key_of(c)] = c.noise;
+  }
+  d.held_out_error = base.held_out_error;
   const double noise = overall_noise(base.residuals);
   progress(options, "base RMS force error " + format_number(d.error_before) + " N, noise " + format_number(noise) + " N");
 
@@ -681,6 +738,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.residuals = e.residuals;
         c.error = e.error;
         for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
+        for (const auto& ch : e.held_out) c.held_out_rms[key_of(ch)] = ch.rms;
+        c.held_out_error = e.held_out_error;
         c.score = information_criterion_change(base.residuals, e.residuals, static_cast<int>(m.parameter_names.size()));
       } catch (const std::exception& ex) {
         c.reason = std::string("its calibration failed: ") + ex.what();
@@ -728,8 +787,10 @@ json Diagnosis::to_json() const {
                      {"verdict", c.verdict},
                      {"reason", c.reason},
                      {"simulations", c.simulations},
-                     {"residual", rj}});
+                     {"residual", rj},
+                     {"held_out_rms", params_json(c.held_out_rms)}});
     cands.back()["error"] = finite_or_null(c.error);
+    cands.back()["held_out_error"] = finite_or_null(c.held_out_error);
   }
   return {{"status", status},
           {"message", message},
@@ -740,6 +801,8 @@ json Diagnosis::to_json() const {
           {"verdict", verdict},
           {"error_before", finite_or_null(error_before)},
           {"error_after", finite_or_null(error_after)},
+          {"held_out", {{"rms", params_json(held_out_rms)}, {"noise", params_json(held_out_noise)},
+                        {"error", finite_or_null(held_out_error)}}},
           {"simulations", simulations},
           {"wall_time_s", wall_time_s}};
 }

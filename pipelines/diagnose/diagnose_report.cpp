@@ -99,13 +99,23 @@ void write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) 
      << "Signature: the share of the residual that the base parameters cannot remove and the effect's own "
         "change of the curves can. Criterion: change of the information criterion against the base fit "
         "(negative = better; accepted below −" << num(options.evidence_threshold) << ").\n\n"
-     << "| effect | target | signature | simulations | RMS error (N) | criterion | verdict | why |\n"
-        "|---|---|---|---|---|---|---|---|\n";
+     << "| effect | target | signature | simulations | RMS error (N) | on data not fitted (N) | criterion | verdict | why |\n"
+        "|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& c : d.candidates)
     md << "| " << c.effect << " | " << (c.target.empty() ? "–" : c.target) << " | " << num(c.signature_score, 2)
-       << " | " << c.simulations << " | " << num(c.error) << " | " << num(c.score) << " | " << c.verdict << " | "
-       << c.reason << " |\n";
+       << " | " << c.simulations << " | " << num(c.error) << " | " << num(c.held_out_error) << " | " << num(c.score)
+       << " | " << c.verdict << " | " << c.reason << " |\n";
   md << "\n";
+  if (!d.held_out_rms.empty()) {
+    md << "Data not fitted (channels of weight 0, held-out cases), a check of every fit; the base fit's RMS "
+          "error there:\n\n| case / channel | RMS (N) | noise (N) |\n|---|---|---|\n";
+    for (const auto& [key, rms] : d.held_out_rms)
+      md << "| " << key << " | " << num(rms) << " | " << num(d.held_out_noise.at(key)) << " |\n";
+    md << "\n";
+  } else {
+    md << "No data was left out of the fits (no channel of weight 0, no `--held-out` case): the fits are not "
+          "checked on data they did not use.\n\n";
+  }
   for (const auto& c : d.candidates) {
     if (!c.tried || c.params.empty()) continue;
     md << "### " << c.effect << ": best set\n\n| parameter | value |\n|---|---|\n";

@@ -120,6 +120,29 @@ TEST(Evidence, SignatureScoreNeedsTheRightShapeAndSign) {
   EXPECT_EQ(signature_score(j1, {j1}, {s}), 0.0);       // nothing left for the effect to explain
 }
 
+TEST(Evidence, HeldOutDataVetoesAFitThatSpoilsIt) {
+  DiagnoseOptions o;  // tolerance: 10 % of the base error, or the noise when larger
+  Diagnosis d;
+  EffectCandidate c;
+  c.held_out_error = 1e6;
+  EXPECT_FALSE(spoils_held_out_data(c, d, o));  // no held-out data: nothing to check
+  d.held_out_error = 100;
+  d.held_out_noise = {{"a/x", 20}, {"b/x", 20}};
+  c.held_out_error = 60;
+  EXPECT_FALSE(spoils_held_out_data(c, d, o));  // confirmed: better on data it did not see
+  c.held_out_error = 119;
+  EXPECT_FALSE(spoils_held_out_data(c, d, o));  // within the noise
+  c.held_out_error = 121;
+  EXPECT_TRUE(spoils_held_out_data(c, d, o));
+  d.held_out_noise = {{"a/x", 1}};
+  c.held_out_error = 111;
+  EXPECT_TRUE(spoils_held_out_data(c, d, o));   // beyond 10 % when the noise is small
+  c.held_out_error = Diagnosis::kNaN;
+  EXPECT_TRUE(spoils_held_out_data(c, d, o));   // the fit no longer reaches the held-out data
+  o.held_out_tolerance = -1;
+  EXPECT_THROW(o.Validate(), CampaignError);
+}
+
 TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   DiagnoseOptions o;
   o.effects = {"joint-closure", "moss"};
@@ -270,8 +293,23 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   while (fgets(buf, sizeof buf, pipe)) text += buf;
   EXPECT_NE(pclose(pipe), 0);
   EXPECT_NE(text.find("moss"), std::string::npos) << text;
+  for (const char* held_out : {"nowhere", "main"}) {  // no such case; the only case
+    pipe = popen((base + " --held-out " + held_out + " 2>&1").c_str(), "r");
+    text.clear();
+    while (fgets(buf, sizeof buf, pipe)) text += buf;
+    EXPECT_NE(pclose(pipe), 0);
+    EXPECT_NE(text.find("--held-out"), std::string::npos) << text;
+  }
+  EXPECT_NE(text.find("every case"), std::string::npos) << text;
   ASSERT_EQ(std::system((base + " --effects support-compliance --candidates 1 --candidate-simulations 8 > /dev/null 2>&1").c_str()), 0);
   const json d = test_support::read_json(dir / "out" / "diagnosis.json");
   EXPECT_TRUE(d["chosen"].is_array());
   EXPECT_TRUE(d["error_before"].is_number());
+  // the abutment channel (weight 0) is not fitted: every fit is checked on it
+  EXPECT_TRUE(d["held_out"]["rms"].contains("main/abutment_horizontal")) << d["held_out"].dump();
+  EXPECT_TRUE(d["held_out"]["error"].is_number());
+  for (const auto& c : d["candidates"])
+    if (c["tried"].get<bool>()) {
+      EXPECT_TRUE(c["held_out_error"].is_number()) << c.dump();
+    }
 }

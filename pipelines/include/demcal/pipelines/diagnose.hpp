@@ -143,6 +143,13 @@ struct DiagnoseOptions {
   // campaign's population and polish.
   std::string candidate_algorithm = "bo";
   double candidate_initial_step = 0.1;
+  // Data the fits do not use, to check them: the campaign's cases named here are left out of every
+  // calibration of the diagnosis (at least one case must stay), and channels of weight 0 are not
+  // fitted anyway. Both are simulated with every fit; an accepted effect whose fit makes that data
+  // worse by more than the larger of its noise and `held_out_tolerance` x the base fit's error
+  // there is rejected: it explains the fitted curves by spoiling others.
+  std::vector<std::string> held_out_cases;
+  double held_out_tolerance = 0.1;        // share of the base fit's held-out error, >= 0
   bool resume = false;                    // continue the base and candidate campaigns from their archives
   bool progress = true;                   // progress lines on stderr
   bool report = true;                     // report.md with figures
@@ -165,6 +172,8 @@ struct EffectCandidate {
   std::string reason;                      // one line: why this verdict
   long simulations = 0;
   std::vector<ChannelResidual> residuals;  // of the best extended set
+  std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
+  double held_out_error = kNaN;            // RMS force error over the held-out channels, N
 };
 
 struct Diagnosis {
@@ -182,10 +191,19 @@ struct Diagnosis {
   std::string verdict;                     // the conclusion in words
   double error_before = kNaN;              // RMS force error over all channels, N
   double error_after = kNaN;
+  std::map<std::string, double> held_out_rms;  // base fit on the data not fitted, "<case>/<channel>" -> N
+  std::map<std::string, double> held_out_noise;
+  double held_out_error = kNaN;            // the base fit's RMS force error there, N (NaN: no such data)
   long simulations = 0;                    // the whole diagnosis (archived re-runs excluded)
   double wall_time_s = 0;
   nlohmann::json to_json() const;          // the diagnosis.json layout
 };
+
+// The check on data no fit used (DiagnoseOptions::held_out_cases, channels of weight 0): whether
+// `candidate`'s fit makes it worse than the base fit of `diagnosis` by more than the larger of its
+// noise and `options.held_out_tolerance` x the base error there. False when there is no such data;
+// true when the candidate's fit no longer reaches it.
+bool spoils_held_out_data(const EffectCandidate& candidate, const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // Runs the loop on a campaign (the same file `demcal calibrate` takes). Throws CampaignError for
 // bad input found before the first simulation; failed candidate calibrations become "rejected"
