@@ -20,6 +20,7 @@ struct DiagnoseFlags {
   long max_simulations = 0;
   int candidates = 3;
   int candidate_simulations = 0;
+  int scatter_runs = 2;
   double evidence = 10;
   std::string candidate_algorithm = "bo";
   bool resume = false, no_report = false, quiet = false;
@@ -47,6 +48,7 @@ void run(const DiagnoseFlags& f) {
   o.max_candidates = f.candidates;
   o.candidate_evaluations = f.candidate_simulations;
   o.evidence_threshold = f.evidence;
+  o.scatter_runs = f.scatter_runs;
   o.candidate_algorithm = f.candidate_algorithm;
   o.resume = f.resume;
   o.report = !f.no_report;
@@ -73,6 +75,8 @@ void setup(CLI::App& app) {
   sub->add_option("--candidate-algorithm", flags->candidate_algorithm,
                   "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
   sub->add_option("--evidence", flags->evidence, "Criterion fall needed to accept an effect");
+  sub->add_option("--scatter-runs", flags->scatter_runs,
+                  "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)");
   sub->add_flag("--resume", flags->resume, "Continue interrupted calibrations from their archives");
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");
   sub->add_flag("--quiet", flags->quiet, "No progress lines");

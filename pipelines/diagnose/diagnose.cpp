@@ -31,6 +31,7 @@ void DiagnoseOptions::Validate() const {
   if (candidate_evaluations < 0) fail("candidate_evaluations", std::to_string(candidate_evaluations), "must be >= 0");
   if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
+  if (scatter_runs < 0) fail("scatter_runs", std::to_string(scatter_runs), "must be >= 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
   if (!(held_out_tolerance >= 0)) fail("held_out_tolerance", std::to_string(held_out_tolerance), "must be >= 0");
   if (candidate_algorithm.empty()) fail("candidate_algorithm", "\"\"", "must name an optimiser");
@@ -67,6 +68,18 @@ double overall_error(const std::vector<ChannelResidual>& residuals) {
   double sum = 0;
   for (const auto& c : residuals) sum += c.rms * c.rms;
   return std::sqrt(sum / static_cast<double>(residuals.size()));
+}
+
+// Root mean square of per-channel values ("<case>/<channel>" -> N), NaN ones left out; 0 when none.
+double overall(const std::map<std::string, double>& per_channel) {
+  double sum = 0;
+  int n = 0;
+  for (const auto& [key, v] : per_channel)
+    if (std::isfinite(v)) {
+      sum += v * v;
+      ++n;
+    }
+  return n ? std::sqrt(sum / n) : 0.0;
 }
 
 double overall_noise(const std::vector<ChannelResidual>& residuals) {
@@ -321,6 +334,40 @@ std::vector<std::vector<double>> probe_points(std::size_t parameters) {
   return points;
 }
 
+// The simulation's own scatter per channel (into `per_channel`, "<case>/<channel>" -> N) and over
+// all channels (returned; NaN when not measured): the base best re-run `runs` times with every free
+// parameter moved by k x 1e-7 of itself; half the mean square difference of each pair of curves on
+// the base grid estimates the variance of one curve.
+double simulation_scatter(const CampaignConfig& config, const std::map<std::string, double>& best,
+                          const std::vector<ChannelResidual>& base, int runs, CaseRunner& runner,
+                          std::map<std::string, double>& per_channel) {
+  std::vector<std::vector<ChannelResidual>> curves = {base};
+  for (int k = 1; k <= runs; ++k) {
+    auto moved = best;
+    for (const auto& p : config.space.free_parameters()) moved[p.name] *= 1 + 1e-7 * k;
+    const Evaluation e = runner.evaluate(config, moved, &base);
+    if (e.ok) curves.push_back(e.residuals);
+  }
+  if (curves.size() < 2) return Diagnosis::kNaN;
+  double total = 0;
+  for (std::size_t c = 0; c < base.size(); ++c) {
+    double sum = 0;
+    int pairs = 0;
+    for (std::size_t i = 0; i < curves.size(); ++i)
+      for (std::size_t j = i + 1; j < curves.size(); ++j, ++pairs) {
+        const auto& a = curves[i][c].simulated;
+        const auto& b = curves[j][c].simulated;
+        double sq = 0;
+        for (std::size_t k = 0; k < a.size(); ++k) sq += (a[k] - b[k]) * (a[k] - b[k]);
+        sum += sq / static_cast<double>(std::max<std::size_t>(1, a.size())) / 2;
+      }
+    const double variance = sum / pairs;
+    per_channel[key_of(base[c])] = std::sqrt(variance);
+    total += variance;
+  }
+  return std::sqrt(total / static_cast<double>(std::max<std::size_t>(1, base.size())));
+}
+
 // Sensitivity of the stacked curves to each free base parameter: one forward difference of 5 % of
 // the unit cube (backwards at the upper bound).
 std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config, const std::map<std::string, double>& best,
@@ -546,7 +593,7 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
     d.error_after = d.error_before;
     d.verdict = "No effect needed: none of the candidate effects explains the residual better than its extra "
                 "parameters cost (RMS force error " + format_number(d.error_before) + " N, noise about " +
-                format_number(noise) + " N).";
+                format_number(noise) + " N, simulation scatter about " + format_number(overall(d.scatter)) + " N).";
   }
 }
 
@@ -564,11 +611,8 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
 bool spoils_held_out_data(const EffectCandidate& c, const Diagnosis& d, const DiagnoseOptions& options) {
   if (!std::isfinite(d.held_out_error)) return false;  // no held-out data
   if (!std::isfinite(c.held_out_error)) return true;   // the fit no longer reaches it
-  double noise = 0;
-  for (const auto& [key, n] : d.held_out_noise)
-    if (std::isfinite(n)) noise += n * n;
-  noise = d.held_out_noise.empty() ? 0 : std::sqrt(noise / static_cast<double>(d.held_out_noise.size()));
-  return c.held_out_error > d.held_out_error + std::max(noise, options.held_out_tolerance * d.held_out_error);
+  return c.held_out_error >
+         d.held_out_error + std::max(overall(d.held_out_noise), options.held_out_tolerance * d.held_out_error);
 }
 
 Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& options) {
@@ -627,7 +671,9 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   }
   d.held_out_error = base.held_out_error;
   const double noise = overall_noise(base.residuals);
-  progress(options, "base RMS force error " + format_number(d.error_before) + " N, noise " + format_number(noise) + " N");
+  const double scatter = simulation_scatter(config, base_params, base.residuals, options.scatter_runs, runner, d.scatter);
+  progress(options, "base RMS force error " + format_number(d.error_before) + " N, noise " + format_number(noise) +
+                        " N, simulation scatter " + format_number(scatter) + " N");
 
   std::vector<const dem::Effect*> effects;
   if (options.effects.empty()) {
@@ -636,12 +682,13 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     for (const auto& n : options.effects) effects.push_back(&dem::find_effect(n));
   }
 
-  const bool at_noise = d.error_before <= options.noise_level_ratio * noise;
+  const double error_floor = std::hypot(noise, std::isfinite(scatter) ? scatter : 0.0);  // what no model can remove
+  const bool at_noise = d.error_before <= options.noise_level_ratio * error_floor;
   if (at_noise) {
     for (const auto* e : effects) {
       EffectCandidate c;
       c.effect = e->name;
-      c.reason = "the base fit is already at the noise level";
+      c.reason = "the base fit is already within the noise and the simulation's scatter";
       d.candidates.push_back(c);
     }
   } else {
@@ -750,8 +797,9 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   // 5. selection
   if (at_noise) {
     d.error_after = d.error_before;
-    d.verdict = "No effect needed: the base fit is already at the measurement noise (RMS force error " +
-                format_number(d.error_before) + " N, noise about " + format_number(noise) + " N).";
+    d.verdict = "No effect needed: the base fit is already within the measurement noise and the simulation's own "
+                "scatter (RMS force error " + format_number(d.error_before) + " N; noise about " + format_number(noise) +
+                " N, scatter of the simulated curve about " + format_number(scatter) + " N).";
   } else {
     select(d, options);
   }
@@ -796,6 +844,7 @@ json Diagnosis::to_json() const {
           {"message", message},
           {"base", base},
           {"noise", params_json(noise)},
+          {"scatter", params_json(scatter)},
           {"candidates", cands},
           {"chosen", chosen},
           {"verdict", verdict},

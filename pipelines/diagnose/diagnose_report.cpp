@@ -78,12 +78,15 @@ void write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) 
   md << "\n## Residual of the base fit (measured − simulated)\n\n"
      << "Noise is estimated from each measured curve alone (local three-point pseudo-residuals, median "
         "absolute deviation). A positive mean means the model is too weak there. Effective points: "
-        "n (1 − ρ) / (1 + ρ) with ρ the lag-1 autocorrelation of the residual.\n\n"
-     << "| case / channel | RMS (N) | noise (N) | RMS / noise | bias (N) | trend (N/mm) | initial mean (N) | "
-        "to peak mean (N) | after peak mean (N) | ρ | effective points |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+        "n (1 − ρ) / (1 + ρ) with ρ the lag-1 autocorrelation of the residual. Scatter: how much the "
+        "simulated curve itself changes when the parameters move by 1e-7 of themselves (stick–slip events "
+        "at other moments); no model can fit below it.\n\n"
+     << "| case / channel | RMS (N) | noise (N) | scatter (N) | RMS / noise | bias (N) | trend (N/mm) | initial mean (N) | "
+        "to peak mean (N) | after peak mean (N) | ρ | effective points |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& r : d.base_residuals) {
+    const auto scatter = d.scatter.find(r.case_name + "/" + r.channel);
     md << "| " << r.case_name << " / " << r.channel << " | " << num(r.rms) << " | " << num(r.noise) << " | "
-       << num(r.rms / r.noise) << " | " << num(r.bias) << " | " << num(r.trend / 1e3) << " | ";
+       << (scatter == d.scatter.end() ? std::string("–") : num(scatter->second)) << " | " << num(r.rms / r.noise) << " | " << num(r.bias) << " | " << num(r.trend / 1e3) << " | ";
     for (const auto& g : r.regions) md << (g.points > 0 ? num(g.mean) : std::string("–")) << " | ";
     md << num(r.autocorrelation) << " | " << num(r.effective_points) << " |\n";
   }

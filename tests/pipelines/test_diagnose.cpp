@@ -305,6 +305,9 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   const json d = test_support::read_json(dir / "out" / "diagnosis.json");
   EXPECT_TRUE(d["chosen"].is_array());
   EXPECT_TRUE(d["error_before"].is_number());
+  // the simulated curve's own scatter, measured on the fitted channel
+  ASSERT_TRUE(d["scatter"].contains("main/load_vertical")) << d.dump();
+  EXPECT_GE(d["scatter"]["main/load_vertical"].get<double>(), 0.0);
   // the abutment channel (weight 0) is not fitted: every fit is checked on it
   EXPECT_TRUE(d["held_out"]["rms"].contains("main/abutment_horizontal")) << d["held_out"].dump();
   EXPECT_TRUE(d["held_out"]["error"].is_number());

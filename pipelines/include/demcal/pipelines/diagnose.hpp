@@ -3,8 +3,9 @@
 //   1. base fit      the campaign's own calibration (or a finished one, `--result`): best set B;
 //   2. residual      per case and channel, measured - simulated force on the objective's grid:
 //                    bias, trend, where along the curve it sits (initial branch, up to the peak,
-//                    after the peak) and with which sign, lag-1 autocorrelation, and the measurement
-//                    noise estimated from the measured curve alone;
+//                    after the peak) and with which sign, lag-1 autocorrelation, the measurement
+//                    noise estimated from the measured curve alone, and the simulation's own
+//                    scatter (B re-run with its parameters moved by 1e-7 of themselves);
 //   3. signatures    for every candidate effect (dem::effect_registry), the change of the simulated
 //                    curves when the effect is switched on at B (two magnitudes), and the base
 //                    parameters' own sensitivities (one finite difference each). An effect scores
@@ -129,6 +130,11 @@ struct DiagnoseOptions {
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
   double tie_margin = 6;                  // accepted effects closer than this are tied, >= 0
   double noise_level_ratio = 1.25;        // base RMS / noise at or below this: nothing to explain, >= 1
+  // Re-runs of the base best with every free parameter moved by k x 1e-7 of itself (k = 1..n): the
+  // simulation's own scatter, since stick-slip events of a block model fall at other moments for
+  // parameter sets that differ by far less than anything physical. It counts with the measurement
+  // noise in the "nothing to explain" test. 0 = not measured, >= 0.
+  int scatter_runs = 2;
   // Base parameters in each candidate calibration: log-scaled ones within best x/÷ narrow_log_factor
   // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range, then clipped to
   // the campaign's bounds. Both 0 (the default): the campaign's own bounds, since base parameters
@@ -185,6 +191,7 @@ struct Diagnosis {
   double base_fitness = kNaN;
   std::map<std::string, double> base_rms;  // "<case>/<channel>" -> N
   std::map<std::string, double> noise;     // "<case>/<channel>" -> N
+  std::map<std::string, double> scatter;   // "<case>/<channel>" -> N, the simulation's own (scatter_runs)
   std::vector<ChannelResidual> base_residuals;
   std::vector<EffectCandidate> candidates; // signature order (best first)
   std::vector<std::string> chosen;         // [] = no effect needed (or a tie)

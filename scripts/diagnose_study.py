@@ -1,0 +1,167 @@
+#!/usr/bin/env python3
+"""The goal study of `demcal diagnose` (docs/diagnose.md): for every hidden effect and a control
+with none, measurements made by the engine with parameters the diagnosis is not told plus force
+noise, one diagnosis per noise seed; then the table of how often the right effect was named, how
+well its parameters came back, and how far the error fell.
+
+usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5]
+                         [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
+                         [--candidate-simulations 80] [--jobs 1]
+
+Each case and seed gets OUT_DIR/<case>/seed-<s>/ (measured.csv, campaign.json, the diagnosis in
+diag/). A finished diagnosis (diag/diagnosis.json) is read, not run again, so the study resumes.
+Writes OUT_DIR/study.json and prints the markdown table.
+"""
+import argparse
+import concurrent.futures
+import json
+import math
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+# The truth the measurement is made with: base parameters (set on the joint groups, as a
+# calibration sets them), then per case the `demcal scene arch` flags of the hidden effect and the
+# effect parameters that a diagnosis should recover (suffix of the calibrated parameter's name).
+BASE_TRUTH = {"kn": 2.6e9, "ks": 0.9e9, "friction_deg": 32.3}
+CASES = {
+    "none": ([], {}),
+    "support-compliance": (["--support-kx", "5e6", "--support-ky", "1e9", "--support-kr", "1e9",
+                            "--support-blocks", "abutment_right"],
+                           {"support_kx": 5e6}),
+    "friction-softening": (["--friction-residual-deg", "22", "--slip-softening", "0.001"],
+                           {"friction_residual_deg": 22, "slip_softening": 0.001}),
+    "joint-closure": (["--closure-max", "1e-4"], {"closure_max": 1e-4}),
+    "cohesion": (["--cohesion", "3e4", "--tensile-strength", "3e4"], {"cohesion": 3e4, "tensile_strength": 3e4}),
+    "crushing-cap": (["--compressive-strength", "2e6"], {"compressive_strength": 2e6}),
+    "boundary-restraint": (["--beam-kr", "3e4"], {"beam_kr": 3e4}),
+}
+
+
+def campaign(measured, args):
+    return {
+        "name": "diagnose-study",
+        "scene": {"generator": "arch", "options": {"contacts_per_joint": args.contacts_per_joint,
+                                                   "velocity": args.velocity,
+                                                   "max_displacement": args.max_displacement}},
+        "measured": measured,
+        "parameters": [{"name": "kn", "lower": 1e8, "upper": 1e10, "scale": "log10"},
+                       {"name": "ks", "lower": 1e8, "upper": 1e10, "scale": "log10"},
+                       {"name": "friction_deg", "lower": 25, "upper": 45}],
+        # the abutment gauge is not fitted (docs/diagnose.md): it is the check on data not fitted
+        "objective": {"type": 1, "weights": {"abutment_horizontal": 0}},
+        "optimiser": {"algorithm": "tbpso", "population": 10, "iterations": 6, "seed": 1},
+        "polish": {"algorithm": "LN_SBPLX", "max_evaluations": 20},
+        "report": False,
+    }
+
+
+def run_one(binary, args, case, seed):
+    folder = os.path.join(args.out, case, "seed-%d" % seed)
+    result = os.path.join(folder, "diag", "diagnosis.json")
+    if not os.path.exists(result):
+        os.makedirs(folder, exist_ok=True)
+        measured = os.path.join(folder, "measured.csv")
+        flags, _ = CASES[case]
+        params = ["--param=%s=%r" % (k, v) for k, v in BASE_TRUTH.items()]
+        subprocess.run([sys.executable, os.path.join(HERE, "synthetic_measurement.py"), binary, measured,
+                        "--seed", str(seed), "--displacement-noise", "0", *params, "--", "arch",
+                        "--contacts-per-joint", str(args.contacts_per_joint), "--velocity", str(args.velocity),
+                        "--max-displacement", str(args.max_displacement), *flags],
+                       check=True, stdout=subprocess.DEVNULL)
+        with open(os.path.join(folder, "campaign.json"), "w") as f:
+            json.dump(campaign(os.path.abspath(measured), args), f, indent=2)
+        with open(os.path.join(folder, "diagnose.log"), "w") as log:
+            subprocess.run([binary, "diagnose", os.path.join(folder, "campaign.json"), "--out",
+                            os.path.join(folder, "diag"), "--effects", args.effects, "--candidate-simulations",
+                            str(args.candidate_simulations), "--no-report"],
+                           check=True, stdout=log, stderr=subprocess.STDOUT)
+    with open(result) as f:
+        return json.load(f)
+
+
+def recovered(diagnosis, case):
+    """Largest relative error of the hidden effect's parameters in the chosen fit (None: not chosen)."""
+    _, truth = CASES[case]
+    for c in diagnosis["candidates"]:
+        if c["effect"] != case or c["verdict"] != "accepted":
+            continue
+        worst = 0.0
+        for suffix, value in truth.items():
+            found = [v for k, v in c["params"].items() if k.split(".")[-1] == suffix]
+            if not found:
+                return None
+            worst = max(worst, abs(found[0] - value) / abs(value))
+        return worst
+    return None
+
+
+def summarise(rows):
+    table = ["| hidden effect | seeds | right verdict | effect named (seeds) | parameters within 25 % | "
+             "error before / after (median, N) | after / before | noise (median, N) | simulations (median) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    by_case = {}
+    for r in rows:
+        by_case.setdefault(r["case"], []).append(r)
+    for case, rs in by_case.items():
+        def median(key):
+            v = sorted(x[key] for x in rs if x[key] is not None and math.isfinite(x[key]))
+            return v[len(v) // 2] if v else float("nan")
+        right = sum(1 for r in rs if r["right"])
+        within = sum(1 for r in rs if r["recovery"] is not None and r["recovery"] <= 0.25)
+        named = ", ".join("/".join(r["chosen"]) or "none" for r in rs)
+        table.append("| %s | %d | **%d/%d** | %s | %s | %.0f / %.0f | %.2f | %.0f | %.0f |" % (
+            case, len(rs), right, len(rs), named, "-" if case == "none" else "%d/%d" % (within, len(rs)),
+            median("before"), median("after"), median("ratio"), median("noise"), median("simulations")))
+    return "\n".join(table)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("binary")
+    p.add_argument("out")
+    p.add_argument("--cases", default=",".join(CASES))
+    p.add_argument("--seeds", type=int, default=5)
+    p.add_argument("--velocity", type=float, default=0.001)
+    p.add_argument("--contacts-per-joint", type=int, default=5)
+    p.add_argument("--max-displacement", type=float, default=0.008)
+    p.add_argument("--candidate-simulations", type=int, default=80)
+    p.add_argument("--effects", default="all", help="effects the diagnosis considers")
+    p.add_argument("--jobs", type=int, default=1)
+    args = p.parse_args()
+    binary = os.path.abspath(args.binary)
+    cases = [c for c in args.cases.split(",") if c]
+    for c in cases:
+        if c not in CASES:
+            p.error("unknown case %r (known: %s)" % (c, ", ".join(CASES)))
+    work = [(c, s) for c in cases for s in range(1, args.seeds + 1)]
+    rows = []
+    with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {pool.submit(run_one, binary, args, c, s): (c, s) for c, s in work}
+        for future in concurrent.futures.as_completed(futures):
+            case, seed = futures[future]
+            try:
+                d = future.result()
+            except subprocess.CalledProcessError as e:
+                print("%s seed %d: failed (%s)" % (case, seed, e), file=sys.stderr)
+                continue
+            chosen = d["chosen"]
+            right = chosen == ([] if case == "none" else [case])
+            before, after = d["error_before"], d["error_after"]
+            noise = math.sqrt(sum(v * v for v in d["noise"].values()) / max(1, len(d["noise"])))
+            rows.append({"case": case, "seed": seed, "chosen": chosen, "right": right,
+                         "recovery": recovered(d, case), "before": before, "after": after,
+                         "ratio": after / before if before else float("nan"), "noise": noise,
+                         "simulations": d["simulations"], "verdict": d["verdict"]})
+            print("%s seed %d: chosen %s, error %.0f -> %.0f N" % (case, seed, chosen or "none", before, after),
+                  file=sys.stderr)
+    rows.sort(key=lambda r: (cases.index(r["case"]), r["seed"]))
+    with open(os.path.join(args.out, "study.json"), "w") as f:
+        json.dump({"settings": vars(args), "rows": rows}, f, indent=2)
+    print(summarise(rows))
+
+
+if __name__ == "__main__":
+    main()
