@@ -1,5 +1,7 @@
+// run_campaign as a list of named stages (docs/pipelines.md, "Stages of run_campaign").
 #include "demcal/pipelines/campaign.hpp"
 
+#include "campaign_internal.hpp"
 #include "demcal/pipelines/archive.hpp"
 #include "demcal/pipelines/backend.hpp"
 #include "demcal/pipelines/mpi.hpp"
@@ -14,312 +16,25 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <memory>
-#include <condition_variable>
-#include <deque>
-#include <mutex>
 #include <optional>
 #include <set>
-#include <thread>
 
 namespace demcal::pipelines {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-namespace {
-
-bool usable_status(const std::string& status) {
-  return status == "completed" || status == "collapsed" || status == "step_limit";
-}
-
-json params_json(const std::map<std::string, double>& params) {
-  json j = json::object();
-  for (const auto& [name, value] : params) j[name] = value;
-  return j;
-}
-
-json finite_or_null(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
-
-// Everything prepared before the first simulation: cases, objectives, backend.
-struct PreparedCases {
-  std::vector<smoothing::Curve> measured;
-  std::vector<std::string> objective_keys;
-  std::vector<std::unique_ptr<smoothing::Objective2>> objective2;  // per case, objective 2 only
-  std::vector<dem::Scene> scenes;                                   // engine backends only
-};
-
-std::vector<std::string> all_parameter_names(const optimise::ParameterSpace& space) {
-  std::vector<std::string> names = space.free_names();
-  for (const auto& [name, value] : space.fixed_parameters()) names.push_back(name);
-  if (space.tied_parameter()) names.push_back(space.tied_parameter()->name);
-  return names;
-}
-
-std::vector<dem::Scene> build_scenes(const CampaignConfig& config) {
-  std::vector<dem::Scene> scenes;
-  const auto names = all_parameter_names(config.space);
-  for (size_t i = 0; i < config.cases.size(); ++i) {
-    const std::string where = config.source + ": cases[" + std::to_string(i) + "].scene";
-    dem::Scene scene = build_scene(config.cases[i].scene, where);
-    dem::Scene probe = scene;
-    for (const auto& name : names) {
-      try {
-        dem::set_parameter(probe, name, dem::get_parameter(scene, name));
-      } catch (const std::exception& e) {
-        std::string known;
-        for (const auto& n : dem::parameter_names(scene)) known += (known.empty() ? "" : ", ") + n;
-        throw CampaignError(config.source + ": parameter '" + name + "' is not a parameter of the scene of case '" +
-                            config.cases[i].name + "' (known: " + known + ")");
-      }
-    }
-    scenes.push_back(std::move(scene));
-  }
-  return scenes;
-}
-
-PreparedCases prepare_cases(const CampaignConfig& config) {
-  PreparedCases p;
-  for (const auto& c : config.cases) {
-    p.measured.push_back(load_measured(c.measured));
-    json key = {{"measured", config.result_defining_json()["cases"][p.measured.size() - 1]["measured"]},
-                {"objective", config.objective},
-                {"points", config.objective_options.points},
-                {"weights", config.objective_options.channel_weights}};
-    if (config.objective == 2) key["smoother"] = config.result_defining_json()["objective"]["smoother"];
-    p.objective_keys.push_back(hash_text(key.dump()));
-    try {
-      smoothing::common_channels(p.measured.back(), p.measured.back(), config.objective_options);
-    } catch (const std::exception& e) {
-      throw CampaignError(std::string("measured curve: ") + e.what());
-    }
-    if (config.objective == 2)
-      p.objective2.push_back(
-          std::make_unique<smoothing::Objective2>(p.measured.back(), config.objective_options, config.smoother));
-  }
-  if (config.backend.type != "command") p.scenes = build_scenes(config);
-  return p;
-}
-
-std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, const PreparedCases& prepared,
-                                                const RunOptions& options) {
-  if (config.backend.type == "command") {
-    CommandBackendOptions o;
-    o.command = config.backend.command;
-    o.timeout_s = config.backend.timeout_s;
-    o.parallel = config.backend.parallel;
-    o.max_output_bytes = static_cast<long long>(config.backend.max_output_mb * 1024 * 1024);
-    o.work_root = (fs::path(config.output) / "runs").string();
-    for (const auto& c : config.cases) {
-      o.case_names.push_back(c.name);
-      o.scene_files.push_back(c.scene.file);
-    }
-    o.parameter_names = all_parameter_names(config.space);
-    try {
-      return std::make_unique<CommandBackend>(o);
-    } catch (const std::invalid_argument& e) {
-      throw CampaignError(config.source + ": backend.command: " + e.what());
-    }
-  }
-  if (config.backend.type == "mpi") {
-    if (!mpi_compiled()) throw CampaignError("this demcal was built without MPI; use --backend threads");
-    if (options.mpi_size < 1) throw CampaignError("--backend mpi must run under mpirun");
-    return make_mpi_backend(prepared.scenes);
-  }
-  return std::make_unique<ThreadBackend>(prepared.scenes, config.backend.threads);
-}
-
-// Fitness of one run against one case: objective 1, and objective 2 when the campaign asks for it.
-// Thread-safe (reads `prepared` only), so it runs on the fitness workers.
-FitnessRecord compute_fitness(std::int64_t run_id, const std::string& status, const smoothing::Curve& curves,
-                              size_t case_index, const PreparedCases& prepared, const CampaignConfig& config) {
-  FitnessRecord f;
-  f.run_id = run_id;
-  f.objective_key = prepared.objective_keys[case_index];
-  f.objective = config.objective;
-  if (!usable_status(status) || curves.rows() < 2) return f;
-  const auto start = std::chrono::steady_clock::now();
-  try {
-    const auto r = smoothing::objective1(prepared.measured[case_index], curves, config.objective_options);
-    f.objective1 = r.fitness;
-    if (config.objective == 1) {
-      f.fitness = r.fitness;
-      f.channels = r.channels;
-    } else {
-      const auto r2 = prepared.objective2[case_index]->evaluate(curves);
-      f.objective2 = r2.fitness;
-      f.fitness = r2.fitness;
-      f.channels = r2.channels;
-    }
-  } catch (const std::exception& e) {
-    f.fitness = NAN;
-    f.objective2 = NAN;
-    f.channels = {{"error", e.what()}};
-  }
-  f.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return f;
-}
-
-// Fitness jobs of one iteration on worker threads. Jobs are submitted as runs become available (from
-// the archive at once, simulated ones as each finishes), so the objective-2 smoothing of finished
-// runs overlaps the simulations still running. Each curve is smoothed by its own network, so a value
-// does not depend on which jobs share a worker: the result is that of a sequential evaluation.
-class FitnessWorkers {
- public:
-  FitnessWorkers(int threads, const PreparedCases& prepared, const CampaignConfig& config)
-      : prepared_(prepared), config_(config) {
-    for (int i = 0; i < std::max(1, threads); ++i) workers_.emplace_back([this] { work(); });
-  }
-  ~FitnessWorkers() { stop(); }
-  // Queues the fitness of run `run_id` (its status and curves) against case `case_index`; returns
-  // the job's index in finish()'s result.
-  size_t submit(std::int64_t run_id, std::string status, smoothing::Curve curves, size_t case_index) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    const size_t index = jobs_.size();
-    jobs_.push_back({run_id, std::move(status), std::move(curves), case_index});
-    results_.emplace_back();
-    queue_.push_back(index);
-    wake_.notify_one();
-    return index;
-  }
-  // Waits for every submitted job; results in submission order.
-  std::vector<FitnessRecord> finish() {
-    stop();
-    return std::move(results_);
-  }
-
- private:
-  struct Job {
-    std::int64_t run_id;
-    std::string status;
-    smoothing::Curve curves;
-    size_t case_index;
-  };
-  void work() {
-    for (;;) {
-      size_t index = 0;
-      {
-        std::unique_lock<std::mutex> lock(mutex_);
-        wake_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
-        if (queue_.empty()) return;
-        index = queue_.front();
-        queue_.pop_front();
-      }
-      const Job* job_ptr = nullptr;
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        job_ptr = &jobs_[index];  // a deque: growing it keeps references valid
-      }
-      const Job& job = *job_ptr;
-      FitnessRecord record = compute_fitness(job.run_id, job.status, job.curves, job.case_index, prepared_, config_);
-      std::lock_guard<std::mutex> lock(mutex_);
-      results_[index] = std::move(record);
-    }
-  }
-  void stop() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stopping_ = true;
-    }
-    wake_.notify_all();
-    for (auto& t : workers_)
-      if (t.joinable()) t.join();
-  }
-  const PreparedCases& prepared_;
-  const CampaignConfig& config_;
-  std::mutex mutex_;
-  std::condition_variable wake_;
-  std::deque<size_t> queue_;
-  std::deque<Job> jobs_;
-  std::vector<FitnessRecord> results_;
-  bool stopping_ = false;
-  std::vector<std::thread> workers_;
-};
-
-std::vector<ParameterSet> top_distinct(const std::vector<ParameterSet>& all, size_t count) {
-  std::vector<const ParameterSet*> sorted;
-  for (const auto& s : all)
-    if (std::isfinite(s.fitness)) sorted.push_back(&s);
-  std::stable_sort(sorted.begin(), sorted.end(),
-                   [](const ParameterSet* a, const ParameterSet* b) { return a->fitness < b->fitness; });
-  std::vector<ParameterSet> top;
-  std::set<std::string> seen;
-  for (const auto* s : sorted) {
-    if (!seen.insert(parameter_key(s->params)).second) continue;
-    top.push_back(*s);
-    if (top.size() == count) break;
-  }
-  return top;
-}
-
-Identifiability identifiability(const std::vector<ParameterSet>& all, const CampaignConfig& config) {
-  Identifiability id;
-  id.relative_band = config.identifiability_band > 0
-                         ? config.identifiability_band
-                         : 1.0 / std::sqrt(2.0 * static_cast<double>(config.objective_options.points));
-  const auto top = top_distinct(all, all.size());
-  if (top.empty()) return id;
-  id.band_fitness = top.front().fitness * (1 + id.relative_band);
-  for (const auto& name : config.space.free_names()) {
-    const double best = top.front().params.at(name);
-    id.parameters[name] = {best, best, best};
-  }
-  for (const auto& s : top) {
-    if (s.fitness > id.band_fitness) break;
-    ++id.sets_in_band;
-    for (auto& [name, range] : id.parameters) {
-      range.min = std::min(range.min, s.params.at(name));
-      range.max = std::max(range.max, s.params.at(name));
-    }
-  }
-  return id;
-}
-
-}  // namespace
-
-json Identifiability::to_json() const {
-  json params = json::object();
-  for (const auto& [name, r] : parameters) {
-    params[name] = {{"best", r.best}, {"min", r.min}, {"max", r.max}};
-    if (r.min > 0) params[name]["max_over_min"] = r.max / r.min;
-  }
-  return {{"relative_band", relative_band}, {"band_fitness", finite_or_null(band_fitness)},
-          {"sets_in_band", sets_in_band}, {"parameters", params}};
-}
-
-json CampaignResult::to_json() const {
-  auto set_json = [](const ParameterSet& s) {
-    return json{{"params", params_json(s.params)}, {"fitness", finite_or_null(s.fitness)},
-                {"iteration", s.iteration}, {"position", s.position}};
-  };
-  json top_json = json::array();
-  for (const auto& s : top) top_json.push_back(set_json(s));
-  json convergence = json::array();
-  for (double v : best_history) convergence.push_back(finite_or_null(v));
-  json j = {{"status", status == CampaignStatus::completed ? "completed" : "failed"},
-          {"message", message},
-          {"best", set_json(best)},
-          {"top", top_json},
-          {"simulations", simulations},
-          {"candidates", candidates},
-          {"failed_runs", failed_runs},
-          {"iterations", iterations},
-          {"optimiser_status", optimiser_status},
-          {"convergence", convergence},
-          {"wall_time_s", wall_time_s},
-          {"identifiability", identifiability.to_json()},
-          {"session", {{"simulated", simulated_this_session}, {"reused_from_archive", reused_from_archive}}}};
-  if (surrogate_used)
-    j["surrogate"] = {{"kind", surrogate_kind},
-                      {"screened", surrogate_screened},
-                      {"simulated", surrogate_simulated},
-                      {"screened_out", surrogate_screened_out},
-                      {"cv_error", finite_or_null(surrogate_cv_error)}};
-  if (polished)
-    j["polish"] = {{"evaluations", polish_evaluations}, {"swarm_best_fitness", finite_or_null(swarm_best_fitness)},
-                   {"status", polish_status}};
-  return j;
-}
+using detail::build_scenes;
+using detail::finite_or_null;
+using detail::FitnessWorkers;
+using detail::identifiability;
+using detail::make_backend;
+using detail::prepare_cases;
+using detail::PreparedCases;
+using detail::top_distinct;
+using detail::usable_status;
 
 namespace {
 
