@@ -1,0 +1,193 @@
+// What a campaign evaluates with: the prepared cases, the backend and the fitness workers.
+#include "campaign_internal.hpp"
+
+#include "demcal/pipelines/mpi.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+
+namespace demcal::pipelines::detail {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+bool usable_status(const std::string& status) {
+  return status == "completed" || status == "collapsed" || status == "step_limit";
+}
+
+namespace {
+
+std::vector<std::string> all_parameter_names(const optimise::ParameterSpace& space) {
+  std::vector<std::string> names = space.free_names();
+  for (const auto& [name, value] : space.fixed_parameters()) names.push_back(name);
+  if (space.tied_parameter()) names.push_back(space.tied_parameter()->name);
+  return names;
+}
+
+}  // namespace
+
+std::vector<dem::Scene> build_scenes(const CampaignConfig& config) {
+  std::vector<dem::Scene> scenes;
+  const auto names = all_parameter_names(config.space);
+  for (size_t i = 0; i < config.cases.size(); ++i) {
+    const std::string where = config.source + ": cases[" + std::to_string(i) + "].scene";
+    dem::Scene scene = build_scene(config.cases[i].scene, where);
+    dem::Scene probe = scene;
+    for (const auto& name : names) {
+      try {
+        dem::set_parameter(probe, name, dem::get_parameter(scene, name));
+      } catch (const std::exception& e) {
+        std::string known;
+        for (const auto& n : dem::parameter_names(scene)) known += (known.empty() ? "" : ", ") + n;
+        throw CampaignError(config.source + ": parameter '" + name + "' is not a parameter of the scene of case '" +
+                            config.cases[i].name + "' (known: " + known + ")");
+      }
+    }
+    scenes.push_back(std::move(scene));
+  }
+  return scenes;
+}
+
+PreparedCases prepare_cases(const CampaignConfig& config) {
+  PreparedCases p;
+  for (const auto& c : config.cases) {
+    p.measured.push_back(load_measured(c.measured));
+    json key = {{"measured", config.result_defining_json()["cases"][p.measured.size() - 1]["measured"]},
+                {"objective", config.objective},
+                {"points", config.objective_options.points},
+                {"weights", config.objective_options.channel_weights}};
+    if (config.objective == 2) key["smoother"] = config.result_defining_json()["objective"]["smoother"];
+    p.objective_keys.push_back(hash_text(key.dump()));
+    try {
+      smoothing::common_channels(p.measured.back(), p.measured.back(), config.objective_options);
+    } catch (const std::exception& e) {
+      throw CampaignError(std::string("measured curve: ") + e.what());
+    }
+    if (config.objective == 2)
+      p.objective2.push_back(
+          std::make_unique<smoothing::Objective2>(p.measured.back(), config.objective_options, config.smoother));
+  }
+  if (config.backend.type != "command") p.scenes = build_scenes(config);
+  return p;
+}
+
+std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, const PreparedCases& prepared,
+                                                const RunOptions& options) {
+  if (config.backend.type == "command") {
+    CommandBackendOptions o;
+    o.command = config.backend.command;
+    o.timeout_s = config.backend.timeout_s;
+    o.parallel = config.backend.parallel;
+    o.max_output_bytes = static_cast<long long>(config.backend.max_output_mb * 1024 * 1024);
+    o.work_root = (fs::path(config.output) / "runs").string();
+    for (const auto& c : config.cases) {
+      o.case_names.push_back(c.name);
+      o.scene_files.push_back(c.scene.file);
+    }
+    o.parameter_names = all_parameter_names(config.space);
+    try {
+      return std::make_unique<CommandBackend>(o);
+    } catch (const std::invalid_argument& e) {
+      throw CampaignError(config.source + ": backend.command: " + e.what());
+    }
+  }
+  if (config.backend.type == "mpi") {
+    if (!mpi_compiled()) throw CampaignError("this demcal was built without MPI; use --backend threads");
+    if (options.mpi_size < 1) throw CampaignError("--backend mpi must run under mpirun");
+    return make_mpi_backend(prepared.scenes);
+  }
+  return std::make_unique<ThreadBackend>(prepared.scenes, config.backend.threads);
+}
+
+namespace {
+
+// Fitness of one run against one case: objective 1, and objective 2 when the campaign asks for it.
+// Thread-safe (reads `prepared` only), so it runs on the fitness workers.
+FitnessRecord compute_fitness(std::int64_t run_id, const std::string& status, const smoothing::Curve& curves,
+                              size_t case_index, const PreparedCases& prepared, const CampaignConfig& config) {
+  FitnessRecord f;
+  f.run_id = run_id;
+  f.objective_key = prepared.objective_keys[case_index];
+  f.objective = config.objective;
+  if (!usable_status(status) || curves.rows() < 2) return f;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    const auto r = smoothing::objective1(prepared.measured[case_index], curves, config.objective_options);
+    f.objective1 = r.fitness;
+    if (config.objective == 1) {
+      f.fitness = r.fitness;
+      f.channels = r.channels;
+    } else {
+      const auto r2 = prepared.objective2[case_index]->evaluate(curves);
+      f.objective2 = r2.fitness;
+      f.fitness = r2.fitness;
+      f.channels = r2.channels;
+    }
+  } catch (const std::exception& e) {
+    f.fitness = NAN;
+    f.objective2 = NAN;
+    f.channels = {{"error", e.what()}};
+  }
+  f.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return f;
+}
+
+}  // namespace
+
+FitnessWorkers::FitnessWorkers(int threads, const PreparedCases& prepared, const CampaignConfig& config)
+    : prepared_(prepared), config_(config) {
+  for (int i = 0; i < std::max(1, threads); ++i) workers_.emplace_back([this] { work(); });
+}
+
+FitnessWorkers::~FitnessWorkers() { stop(); }
+
+size_t FitnessWorkers::submit(std::int64_t run_id, std::string status, smoothing::Curve curves, size_t case_index) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const size_t index = jobs_.size();
+  jobs_.push_back({run_id, std::move(status), std::move(curves), case_index});
+  results_.emplace_back();
+  queue_.push_back(index);
+  wake_.notify_one();
+  return index;
+}
+
+std::vector<FitnessRecord> FitnessWorkers::finish() {
+  stop();
+  return std::move(results_);
+}
+
+void FitnessWorkers::work() {
+  for (;;) {
+    size_t index = 0;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+      if (queue_.empty()) return;
+      index = queue_.front();
+      queue_.pop_front();
+    }
+    const Job* job_ptr = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      job_ptr = &jobs_[index];  // a deque: growing it keeps references valid
+    }
+    const Job& job = *job_ptr;
+    FitnessRecord record = compute_fitness(job.run_id, job.status, job.curves, job.case_index, prepared_, config_);
+    std::lock_guard<std::mutex> lock(mutex_);
+    results_[index] = std::move(record);
+  }
+}
+
+void FitnessWorkers::stop() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  for (auto& t : workers_)
+    if (t.joinable()) t.join();
+}
+
+}  // namespace demcal::pipelines::detail

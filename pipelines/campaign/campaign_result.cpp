@@ -1,0 +1,111 @@
+// result.json: the campaign result and its identifiability band as JSON.
+#include "campaign_internal.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+namespace demcal::pipelines {
+
+using nlohmann::json;
+
+namespace detail {
+
+json finite_or_null(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
+
+std::vector<ParameterSet> top_distinct(const std::vector<ParameterSet>& all, size_t count) {
+  std::vector<const ParameterSet*> sorted;
+  for (const auto& s : all)
+    if (std::isfinite(s.fitness)) sorted.push_back(&s);
+  std::stable_sort(sorted.begin(), sorted.end(),
+                   [](const ParameterSet* a, const ParameterSet* b) { return a->fitness < b->fitness; });
+  std::vector<ParameterSet> top;
+  std::set<std::string> seen;
+  for (const auto* s : sorted) {
+    if (!seen.insert(parameter_key(s->params)).second) continue;
+    top.push_back(*s);
+    if (top.size() == count) break;
+  }
+  return top;
+}
+
+Identifiability identifiability(const std::vector<ParameterSet>& all, const CampaignConfig& config) {
+  Identifiability id;
+  id.relative_band = config.identifiability_band > 0
+                         ? config.identifiability_band
+                         : 1.0 / std::sqrt(2.0 * static_cast<double>(config.objective_options.points));
+  const auto top = top_distinct(all, all.size());
+  if (top.empty()) return id;
+  id.band_fitness = top.front().fitness * (1 + id.relative_band);
+  for (const auto& name : config.space.free_names()) {
+    const double best = top.front().params.at(name);
+    id.parameters[name] = {best, best, best};
+  }
+  for (const auto& s : top) {
+    if (s.fitness > id.band_fitness) break;
+    ++id.sets_in_band;
+    for (auto& [name, range] : id.parameters) {
+      range.min = std::min(range.min, s.params.at(name));
+      range.max = std::max(range.max, s.params.at(name));
+    }
+  }
+  return id;
+}
+
+}  // namespace detail
+
+namespace {
+
+json params_json(const std::map<std::string, double>& params) {
+  json j = json::object();
+  for (const auto& [name, value] : params) j[name] = value;
+  return j;
+}
+
+}  // namespace
+
+json Identifiability::to_json() const {
+  json params = json::object();
+  for (const auto& [name, r] : parameters) {
+    params[name] = {{"best", r.best}, {"min", r.min}, {"max", r.max}};
+    if (r.min > 0) params[name]["max_over_min"] = r.max / r.min;
+  }
+  return {{"relative_band", relative_band}, {"band_fitness", detail::finite_or_null(band_fitness)},
+          {"sets_in_band", sets_in_band}, {"parameters", params}};
+}
+
+json CampaignResult::to_json() const {
+  auto set_json = [](const ParameterSet& s) {
+    return json{{"params", params_json(s.params)}, {"fitness", detail::finite_or_null(s.fitness)},
+                {"iteration", s.iteration}, {"position", s.position}};
+  };
+  json top_json = json::array();
+  for (const auto& s : top) top_json.push_back(set_json(s));
+  json convergence = json::array();
+  for (double v : best_history) convergence.push_back(detail::finite_or_null(v));
+  json j = {{"status", status == CampaignStatus::completed ? "completed" : "failed"},
+          {"message", message},
+          {"best", set_json(best)},
+          {"top", top_json},
+          {"simulations", simulations},
+          {"candidates", candidates},
+          {"failed_runs", failed_runs},
+          {"iterations", iterations},
+          {"optimiser_status", optimiser_status},
+          {"convergence", convergence},
+          {"wall_time_s", wall_time_s},
+          {"identifiability", identifiability.to_json()},
+          {"session", {{"simulated", simulated_this_session}, {"reused_from_archive", reused_from_archive}}}};
+  if (surrogate_used)
+    j["surrogate"] = {{"kind", surrogate_kind},
+                      {"screened", surrogate_screened},
+                      {"simulated", surrogate_simulated},
+                      {"screened_out", surrogate_screened_out},
+                      {"cv_error", detail::finite_or_null(surrogate_cv_error)}};
+  if (polished)
+    j["polish"] = {{"evaluations", polish_evaluations}, {"swarm_best_fitness", detail::finite_or_null(swarm_best_fitness)},
+                   {"status", polish_status}};
+  return j;
+}
+
+}  // namespace demcal::pipelines
