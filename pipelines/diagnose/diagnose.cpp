@@ -457,8 +457,10 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   c.report = options.report;
   c.optimiser.max_evaluations = evaluations;
   c.optimiser.algorithm = options.candidate_algorithm;
-  if (options.candidate_algorithm.rfind("nlopt:", 0) == 0) {
-    // Warm start: the base best with the effect at its best-explaining probe, clipped to the box.
+  const bool local = options.candidate_algorithm.rfind("nlopt:", 0) == 0;
+  if (local || options.candidate_algorithm == "bo") {
+    // Warm start: the base best with the effect at its best-explaining probe, clipped to the box
+    // (the local search's start; the first point of the Bayesian search's design).
     const auto names = space.free_names();
     const Eigen::VectorXd lower = space.lower_bounds(), upper = space.upper_bounds();
     c.optimiser.initial_point.clear();
@@ -467,9 +469,12 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
       const double v = it != warm.end() ? it->second : best.at(names[i]);
       c.optimiser.initial_point.push_back(std::clamp(v, lower(static_cast<Eigen::Index>(i)), upper(static_cast<Eigen::Index>(i))));
     }
-    c.optimiser.initial_step = options.candidate_initial_step;
-    c.polish.enabled = false;
-  } else if (c.polish.enabled) {
+    if (local) {
+      c.optimiser.initial_step = options.candidate_initial_step;
+      c.polish.enabled = false;
+    }
+  }
+  if (!local && c.polish.enabled) {
     c.polish.options.max_evaluations = std::min<long>(c.polish.options.max_evaluations, evaluations / 4);
   }
   return c;

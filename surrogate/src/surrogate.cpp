@@ -444,6 +444,10 @@ class BayesOptimiser final : public optimise::Optimiser {
       for (long i = 0; i < design; ++i)
         design_(i, k) = (static_cast<double>(perm[static_cast<size_t>(i)]) + uniform01(rng)) / static_cast<double>(design);
     }
+    // A given start is the design's first point: a warm start from a known good set.
+    if (!options.initial_point.empty() && design > 0)
+      design_.row(0) = space.to_unit(Eigen::Map<const Eigen::VectorXd>(options.initial_point.data(), d))
+                           .cwiseMax(0.0).cwiseMin(1.0).transpose();
   }
 
   std::vector<Eigen::VectorXd> ask() override {

@@ -247,10 +247,11 @@ TEST(DiagnoseLoop, ControlNeedsNoEffect) {
 TEST(DiagnoseLoop, EveryCandidateIsProbedCalibratedJudgedAndReported) {
   const fs::path dir = test_support::fresh_dir("diagnose", "support");
   const Diagnosis d = diagnose({"support-compliance", {"abutment_right"},
-                                {{"abutment_right.support_kx", 5e6}, {"abutment_right.support_ky", 1e9},
+                                {{"abutment_right.support_kx", 1e6}, {"abutment_right.support_ky", 1e9},
                                  {"abutment_right.support_kr", 1e9}}},
                                dir);
-  EXPECT_GT(d.error_before, 1.25 * std::sqrt(d.noise.begin()->second * d.noise.begin()->second));
+  // the residual stands out of the noise and the simulation's own scatter, so the loop goes on
+  EXPECT_GT(d.error_before, 1.25 * std::hypot(d.noise.begin()->second, d.scatter.begin()->second));
   ASSERT_EQ(d.candidates.size(), 2u);
   EXPECT_GE(d.candidates[0].signature_score, d.candidates[1].signature_score);  // ranked
   for (const auto& c : d.candidates) {

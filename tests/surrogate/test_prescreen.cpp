@@ -122,6 +122,26 @@ TEST(BayesOptimiser, FindsTheMinimumAndResumesExactly) {
   EXPECT_EQ(run(5), straight);
 }
 
+TEST(BayesOptimiser, StartsItsDesignAtTheGivenPoint) {
+  const Problem problem;
+  const auto space = space_of(problem.f);
+  optimise::OptimiserOptions o;
+  o.population = 10;
+  o.max_evaluations = 20;
+  o.seed = 2;
+  const Eigen::VectorXd start = space.to_physical(Eigen::VectorXd::Constant(space.dimension(), 0.3));
+  o.initial_point.assign(start.data(), start.data() + start.size());
+  auto opt = make_bayes_optimiser(space, o, SurrogateOptions{});
+  const auto batch = opt->ask();
+  ASSERT_FALSE(batch.empty());
+  EXPECT_LT((batch.front() - start).norm(), 1e-9 * (1 + start.norm()));
+  auto plain = o;
+  plain.initial_point.clear();
+  const auto other = make_bayes_optimiser(space, plain, SurrogateOptions{})->ask();
+  EXPECT_GT((other.front() - start).norm(), 1e-6);  // the design's own first point differs
+  for (std::size_t i = 1; i < batch.size(); ++i) EXPECT_EQ(batch[i], other[i]);  // the rest is unchanged
+}
+
 TEST(CrossValidation, ReportsErrorAndCoverage) {
   const Problem problem;
   std::vector<TrainingRow> rows;

@@ -147,7 +147,8 @@ struct OptimiserOptions {
                                        // generation (paper: 0, the new population replaces the old)
 
   // NLopt.
-  std::vector<double> initial_point;   // physical start for NLopt (empty = centre of the cube)
+  std::vector<double> initial_point;   // physical start for NLopt (empty = centre of the cube); for
+                                       // `bo` (surrogate/) the first point of its initial design
   double initial_step = 0.0;           // NLopt initial step in unit-cube lengths (0 = NLopt default)
   int nlopt_population = 0;            // NLopt's own population (CRS2, ISRES, ESCH); 0 = its default
   double xtol_rel = 0.0;               // NLopt stopping tolerances (0 = off); the budget always holds
