@@ -161,6 +161,11 @@ class Engine {
     points_ = scene_.contact.points_per_joint;
     cos_edge_tolerance_ = std::cos(scene_.contact.edge_angle_tolerance);
     margin_ = scene_.contact.search_margin;
+    // The broad phase's skin: a twentieth of the smallest block's box (a few mm for masonry units),
+    // and at least the search margin. Larger means fewer sweeps and more candidates to test.
+    double smallest = std::numeric_limits<double>::infinity();
+    for (const Body& b : bodies_) smallest = std::min(smallest, (b.box_max - b.box_min).minCoeff());
+    skin_ = std::max(margin_, 0.05 * smallest);
     setup_loading();
     setup_gap();
     for (auto* scratch : {&soa_x_, &soa_y_, &soa_area_, &soa_increment_}) scratch->assign(std::max(points_, 1), 0.0);
@@ -177,6 +182,10 @@ class Engine {
   double critical_time_step() const;
   int group_for(const Body& a, const Body& b, const Vec2& normal) const;
   void compute_forces();
+  void sweep(double margin);  // pairs_ <- every pair whose boxes, grown by margin, overlap (sorted)
+  bool candidates_stale() const;
+  void sweep_candidates();
+  void reference_broad_phase();
   void process_pair(int ia, int ib, int& contact_index);
   // Geometry of one edge or corner contact's nodes, for the node loop with effects.
   struct NodeLayout {
@@ -212,10 +221,20 @@ class Engine {
   std::vector<GroupLaw> groups_;
   std::vector<Contact> contacts_;                         // every joint ever within the search margin
   std::unordered_map<std::uint64_t, int> contact_index_;  // pair key -> index in contacts_
-  // This step's and the previous step's broad-phase pairs, sorted by key, with their contact's
-  // index (-1: none yet): a pair that stays a pair finds its contact by a merge, without hashing.
-  std::vector<std::pair<std::uint64_t, int>> pair_contacts_, previous_pair_contacts_;
+  // Broad phase with a skin (Verlet list): candidate pairs, swept with the search margin plus
+  // `skin_`, sorted by (first, second), each with its contact's index (-1: none yet); the sweep is
+  // repeated only once a bounding box has moved more than `skin_` / 4 since the last one, and every
+  // step keeps the candidates that pass the exact box test of a sweep with the search margin.
+  struct Candidate {
+    int first = 0, second = 0;
+    int contact = -1;
+  };
+  std::vector<Candidate> candidates_;
+  std::vector<Vec2> swept_min_, swept_max_;  // each body's box at the last sweep
+  double skin_ = 0;
+  long sweeps_ = 0;
   std::vector<std::pair<int, int>> pairs_;
+  std::vector<std::pair<std::uint64_t, int>> pair_contacts_;  // reference path: key, contact index
   std::vector<int> order_;
   int points_ = 15;
   double cos_edge_tolerance_ = 1;
@@ -716,6 +735,82 @@ void Engine::process_nodes_with_effects(Body& a, Body& b, Contact& contact, cons
   apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
 }
 
+// The broad phase's exact test: the two boxes, grown by `margin`, overlap along x and along y. It is
+// the test of the sweep below (which sorts by box_min.x and stops at the first box beyond reach).
+static bool boxes_within(const Body& p, const Body& q, double margin) {
+  return !(q.box_min.x() > p.box_max.x() + margin || p.box_min.x() > q.box_max.x() + margin ||
+           q.box_min.y() > p.box_max.y() + margin || p.box_min.y() > q.box_max.y() + margin);
+}
+
+// Sweep along x over the bounding boxes grown by `margin`: pairs_ gets every pair (first < second)
+// within reach that is not two fixed blocks, sorted.
+void Engine::sweep(double margin) {
+  order_.resize(bodies_.size());
+  for (std::size_t i = 0; i < bodies_.size(); ++i) order_[i] = static_cast<int>(i);
+  std::sort(order_.begin(), order_.end(), [&](int i, int j) {
+    return bodies_[i].box_min.x() < bodies_[j].box_min.x() || (bodies_[i].box_min.x() == bodies_[j].box_min.x() && i < j);
+  });
+  pairs_.clear();
+  for (std::size_t p = 0; p < order_.size(); ++p) {
+    const Body& bi = bodies_[order_[p]];
+    for (std::size_t q = p + 1; q < order_.size(); ++q) {
+      const Body& bj = bodies_[order_[q]];
+      if (bj.box_min.x() > bi.box_max.x() + margin) break;
+      if (bi.fixed && bj.fixed) continue;
+      if (bj.box_min.y() > bi.box_max.y() + margin || bi.box_min.y() > bj.box_max.y() + margin) continue;
+      pairs_.emplace_back(std::min(order_[p], order_[q]), std::max(order_[p], order_[q]));
+    }
+  }
+  std::sort(pairs_.begin(), pairs_.end());
+}
+
+// The candidates stay a superset of this step's pairs while no box coordinate has moved more than
+// d = skin / 4 since their sweep: a pair within `margin` now was within margin + 2 d < margin + skin
+// then (the factor 2 left over covers rounding).
+bool Engine::candidates_stale() const {
+  if (swept_min_.size() != bodies_.size()) return true;
+  const double limit = 0.25 * skin_;
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    const Body& b = bodies_[i];
+    if ((b.box_min - swept_min_[i]).cwiseAbs().maxCoeff() > limit || (b.box_max - swept_max_[i]).cwiseAbs().maxCoeff() > limit)
+      return true;
+  }
+  return false;
+}
+
+// A new candidate list: a sweep with the search margin plus the skin; each candidate finds its
+// contact through the hash map (a sweep is rare: once a block has moved a quarter of the skin).
+void Engine::sweep_candidates() {
+  sweep(margin_ + skin_);
+  candidates_.clear();
+  for (const auto& [i, j] : pairs_) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
+    const auto found = contact_index_.find(key);
+    candidates_.push_back({i, j, found == contact_index_.end() ? -1 : found->second});
+  }
+  swept_min_.resize(bodies_.size());
+  swept_max_.resize(bodies_.size());
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    swept_min_[i] = bodies_[i].box_min;
+    swept_max_[i] = bodies_[i].box_max;
+  }
+  ++sweeps_;
+}
+
+// The broad phase as the engine ran it before the candidate list (DEMCAL_ENGINE_PATH=reference): a
+// sweep with the search margin every step and a hash look-up of every pair's contact.
+void Engine::reference_broad_phase() {
+  sweep(margin_);
+  pair_contacts_.clear();
+  for (const auto& [i, j] : pairs_) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
+    const auto found = contact_index_.find(key);
+    pair_contacts_.emplace_back(key, found == contact_index_.end() ? -1 : found->second);
+  }
+  for (Contact& c : contacts_) c.seen = false;
+  for (std::size_t p = 0; p < pairs_.size(); ++p) process_pair(pairs_[p].first, pairs_[p].second, pair_contacts_[p].second);
+}
+
 void Engine::compute_forces() {
   for (Body& b : bodies_) {
     b.force = b.weight;
@@ -741,42 +836,14 @@ void Engine::compute_forces() {
     b.torque += cross(p - b.position, force);
   }
 
-  // Broad phase: sweep along x over bounding boxes grown by the search margin.
-  order_.resize(bodies_.size());
-  for (std::size_t i = 0; i < bodies_.size(); ++i) order_[i] = static_cast<int>(i);
-  std::sort(order_.begin(), order_.end(), [&](int i, int j) {
-    return bodies_[i].box_min.x() < bodies_[j].box_min.x() || (bodies_[i].box_min.x() == bodies_[j].box_min.x() && i < j);
-  });
-  pairs_.clear();
-  for (std::size_t p = 0; p < order_.size(); ++p) {
-    const Body& bi = bodies_[order_[p]];
-    for (std::size_t q = p + 1; q < order_.size(); ++q) {
-      const Body& bj = bodies_[order_[q]];
-      if (bj.box_min.x() > bi.box_max.x() + margin_) break;
-      if (bi.fixed && bj.fixed) continue;
-      if (bj.box_min.y() > bi.box_max.y() + margin_ || bi.box_min.y() > bj.box_max.y() + margin_) continue;
-      pairs_.emplace_back(std::min(order_[p], order_[q]), std::max(order_[p], order_[q]));
-    }
+  if (reference_path_) {
+    reference_broad_phase();
+  } else {
+    if (candidates_stale()) sweep_candidates();
+    for (Contact& c : contacts_) c.seen = false;
+    for (Candidate& c : candidates_)
+      if (boxes_within(bodies_[c.first], bodies_[c.second], margin_)) process_pair(c.first, c.second, c.contact);
   }
-  std::sort(pairs_.begin(), pairs_.end());
-  // Each pair's contact: found in the previous step's list by a merge (both sorted by key), or by a
-  // hash look-up for a pair new to the broad phase (the reference path looks up every pair).
-  pair_contacts_.clear();
-  std::size_t previous = 0;
-  for (const auto& [i, j] : pairs_) {
-    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
-    int index = -1;
-    while (previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first < key) ++previous;
-    if (!reference_path_ && previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first == key) {
-      index = previous_pair_contacts_[previous].second;
-    } else if (const auto found = contact_index_.find(key); found != contact_index_.end()) {
-      index = found->second;
-    }
-    pair_contacts_.emplace_back(key, index);
-  }
-  for (Contact& c : contacts_) c.seen = false;
-  for (std::size_t p = 0; p < pairs_.size(); ++p) process_pair(pairs_[p].first, pairs_[p].second, pair_contacts_[p].second);
-  std::swap(pair_contacts_, previous_pair_contacts_);
   first_step_ = false;
   for (Contact& c : contacts_) {
     c.active = c.seen;
