@@ -36,6 +36,9 @@ struct Body {
   std::vector<Vec2> world;
   std::vector<Vec2> local_normals;  // outward unit normal of edge i (vertex i to i+1) at angle 0
   std::vector<Vec2> world_normals;
+  // The same in plain arrays, for the separating-axis test: vertex coordinates, edge normals and
+  // each edge's offset (its first vertex . its normal), updated with the position.
+  std::vector<double> world_x, world_y, normal_x, normal_y, edge_offset;
   std::vector<double> edge_lengths;
   Vec2 start_position = Vec2::Zero();
   Vec2 position = Vec2::Zero();
@@ -73,6 +76,11 @@ struct Body {
       world_normals[i] = m * local_normals[i];
       box_min = box_min.cwiseMin(world[i]);
       box_max = box_max.cwiseMax(world[i]);
+      world_x[i] = world[i].x();
+      world_y[i] = world[i].y();
+      normal_x[i] = world_normals[i].x();
+      normal_y[i] = world_normals[i].y();
+      edge_offset[i] = world[i].dot(world_normals[i]);
     }
   }
 };
@@ -169,6 +177,7 @@ class Engine {
     setup_loading();
     setup_gap();
     for (auto* scratch : {&soa_x_, &soa_y_, &soa_area_, &soa_increment_}) scratch->assign(std::max(points_, 1), 0.0);
+    sat_scratch_.assign(max_vertices_, 0.0);
     dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
   }
 
@@ -249,6 +258,8 @@ class Engine {
   // Scratch of the node loop, sized once per joint layout (no allocation in the step).
   std::vector<double> node_s_, node_gap_, node_length_;          // per node: s along the face, gap, length
   std::vector<double> soa_x_, soa_y_, soa_area_, soa_increment_;  // per node: kinematics (stage 1)
+  std::size_t max_vertices_ = 0;    // of any block
+  std::vector<double> sat_scratch_;  // per edge of one block: the separating-axis test's minima
 
   // joint-gap: the pair key and the joint's two ends in the first block's frame.
   bool has_gap_ = false;
@@ -291,6 +302,9 @@ void Engine::build_bodies() {
       body.local_normals.push_back(Vec2(edge.y(), -edge.x()) / edge.norm());
     }
     body.world_normals = body.local_normals;
+    for (auto* soa : {&body.world_x, &body.world_y, &body.normal_x, &body.normal_y, &body.edge_offset})
+      soa->assign(body.local.size(), 0.0);
+    max_vertices_ = std::max(max_vertices_, body.local.size());
     body.position = body.start_position = c;
     body.mass = b.density * scene_.width * geometry::signed_area(b.vertices);
     body.inertia = b.density * scene_.width * geometry::polar_moment(b.vertices);
@@ -424,9 +438,46 @@ int Engine::group_for(const Body& a, const Body& b, const Vec2& normal) const {
   return 0;
 }
 
-// Largest separation of body q from the edges of body p, and the edge that gives it; stops early
-// once a separation beyond `margin` proves the pair apart.
-static std::pair<double, int> max_separation(const Body& p, const Body& q, double margin) {
+// Largest separation of body q from the edges of body p, and the edge that gives it; a separation
+// beyond `margin` proves the pair apart (the value returned is then only known to exceed margin).
+// Per edge e this is the scalar form
+//   s_e = min over q's vertices v of (v . n_e) - offset_e,  best = the first largest s_e,
+// computed with the vertex loop outside and the edge loop inside, over plain arrays: the edge loop
+// vectorises, and each s_e still takes its minimum over the vertices in the same order (the same
+// bits as the form below, kept for the reference path). `scratch` holds p's edge count of doubles.
+// N, M > 0: p's and q's vertex counts known at compile time (quadrilaterals, the common case, are
+// unrolled completely); 0: read from the bodies.
+template <int N, int M>
+static std::pair<double, int> max_separation(const Body& p, const Body& q, double margin, double* __restrict scratch) {
+  const int n = N > 0 ? N : static_cast<int>(p.world_x.size()), m = M > 0 ? M : static_cast<int>(q.world_x.size());
+  const double* __restrict nx = p.normal_x.data();
+  const double* __restrict ny = p.normal_y.data();
+  double* __restrict s = scratch;
+  for (int e = 0; e < n; ++e) s[e] = std::numeric_limits<double>::infinity();
+  for (int v = 0; v < m; ++v) {
+    const double x = q.world_x[v], y = q.world_y[v];
+    for (int e = 0; e < n; ++e) s[e] = std::min(s[e], x * nx[e] + y * ny[e]);
+  }
+  double best = -std::numeric_limits<double>::infinity();
+  int best_edge = 0;
+  for (int e = 0; e < n; ++e) {
+    const double separation = s[e] - p.edge_offset[e];
+    if (separation > best) {
+      best = separation;
+      best_edge = e;
+      if (separation > margin) break;
+    }
+  }
+  return {best, best_edge};
+}
+
+static std::pair<double, int> max_separation(const Body& p, const Body& q, double margin, double* scratch) {
+  if (p.world_x.size() == 4 && q.world_x.size() == 4) return max_separation<4, 4>(p, q, margin, scratch);
+  return max_separation<0, 0>(p, q, margin, scratch);
+}
+
+// The separating-axis test of the reference path (DEMCAL_ENGINE_PATH=reference), edge by edge.
+static std::pair<double, int> max_separation_reference(const Body& p, const Body& q, double margin) {
   double best = -std::numeric_limits<double>::infinity();
   int best_edge = 0;
   const int n = static_cast<int>(p.world.size());
@@ -450,9 +501,11 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   Body& a = bodies_[ia];
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
-  const auto [sep_a, edge_a] = max_separation(a, b, margin_);
+  const auto [sep_a, edge_a] = reference_path_ ? max_separation_reference(a, b, margin_)
+                                               : max_separation(a, b, margin_, sat_scratch_.data());
   if (sep_a > margin_) return;
-  const auto [sep_b, edge_b] = max_separation(b, a, margin_);
+  const auto [sep_b, edge_b] = reference_path_ ? max_separation_reference(b, a, margin_)
+                                               : max_separation(b, a, margin_, sat_scratch_.data());
   if (sep_b > margin_) return;
 
   Contact* existing = contact_index >= 0 ? &contacts_[contact_index] : nullptr;
