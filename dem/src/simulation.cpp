@@ -541,7 +541,7 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   std::vector<double>& gaps = node_gap_;
   std::vector<double>& lengths = node_length_;
   if (edge_contact) {
-    const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[(inc_edge + 1) % ni];
+    const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[inc_edge + 1 < ni ? inc_edge + 1 : 0];  // no integer division
     const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
     const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(ref_length, std::max(s1, s2));
     if (hi - lo <= 1e-9 * ref_length) return;
@@ -574,8 +574,9 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     }
     const double s = (inc.world[deepest] - r1).dot(tr);
     if (s < 0 || s > ref_length) return;
-    const double shorter = std::min((inc.world[(deepest + 1) % ni] - inc.world[deepest]).norm(),
-                                    (inc.world[(deepest + ni - 1) % ni] - inc.world[deepest]).norm());
+    const int next = deepest + 1 < ni ? deepest + 1 : 0, previous = deepest > 0 ? deepest - 1 : ni - 1;
+    const double shorter = std::min((inc.world[next] - inc.world[deepest]).norm(),
+                                    (inc.world[previous] - inc.world[deepest]).norm());
     s_nodes.assign(1, s);
     gaps.assign(1, depth);
     lengths.assign(1, shorter / (2.0 * (points_ - 1)));
