@@ -438,17 +438,17 @@ int Engine::group_for(const Body& a, const Body& b, const Vec2& normal) const {
   return 0;
 }
 
-// Largest separation of body q from the edges of body p, and the edge that gives it; a separation
-// beyond `margin` proves the pair apart (the value returned is then only known to exceed margin).
+// Largest separation of body q from the edges of body p, and the (first) edge that gives it.
 // Per edge e this is the scalar form
 //   s_e = min over q's vertices v of (v . n_e) - offset_e,  best = the first largest s_e,
 // computed with the vertex loop outside and the edge loop inside, over plain arrays: the edge loop
-// vectorises, and each s_e still takes its minimum over the vertices in the same order (the same
-// bits as the form below, kept for the reference path). `scratch` holds p's edge count of doubles.
+// vectorises, and each s_e still takes its minimum over the vertices in the same order: the same
+// bits as max_separation_reference below, which stops at the first edge beyond the search margin
+// (either way the caller then drops the pair). `scratch` holds p's edge count of doubles.
 // N, M > 0: p's and q's vertex counts known at compile time (quadrilaterals, the common case, are
 // unrolled completely); 0: read from the bodies.
 template <int N, int M>
-static std::pair<double, int> max_separation(const Body& p, const Body& q, double margin, double* __restrict scratch) {
+static std::pair<double, int> max_separation(const Body& p, const Body& q, double* __restrict scratch) {
   const int n = N > 0 ? N : static_cast<int>(p.world_x.size()), m = M > 0 ? M : static_cast<int>(q.world_x.size());
   const double* __restrict nx = p.normal_x.data();
   const double* __restrict ny = p.normal_y.data();
@@ -458,22 +458,22 @@ static std::pair<double, int> max_separation(const Body& p, const Body& q, doubl
     const double x = q.world_x[v], y = q.world_y[v];
     for (int e = 0; e < n; ++e) s[e] = std::min(s[e], x * nx[e] + y * ny[e]);
   }
+  // The first largest separation, by selects rather than branches (which edge wins varies from pair
+  // to pair, so a branch would often be mispredicted).
   double best = -std::numeric_limits<double>::infinity();
   int best_edge = 0;
   for (int e = 0; e < n; ++e) {
     const double separation = s[e] - p.edge_offset[e];
-    if (separation > best) {
-      best = separation;
-      best_edge = e;
-      if (separation > margin) break;
-    }
+    const bool larger = separation > best;
+    best = larger ? separation : best;
+    best_edge = larger ? e : best_edge;
   }
   return {best, best_edge};
 }
 
-static std::pair<double, int> max_separation(const Body& p, const Body& q, double margin, double* scratch) {
-  if (p.world_x.size() == 4 && q.world_x.size() == 4) return max_separation<4, 4>(p, q, margin, scratch);
-  return max_separation<0, 0>(p, q, margin, scratch);
+static std::pair<double, int> max_separation(const Body& p, const Body& q, double* scratch) {
+  if (p.world_x.size() == 4 && q.world_x.size() == 4) return max_separation<4, 4>(p, q, scratch);
+  return max_separation<0, 0>(p, q, scratch);
 }
 
 // The separating-axis test of the reference path (DEMCAL_ENGINE_PATH=reference), edge by edge.
@@ -502,10 +502,10 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
   const auto [sep_a, edge_a] = reference_path_ ? max_separation_reference(a, b, margin_)
-                                               : max_separation(a, b, margin_, sat_scratch_.data());
+                                               : max_separation(a, b, sat_scratch_.data());
   if (sep_a > margin_) return;
   const auto [sep_b, edge_b] = reference_path_ ? max_separation_reference(b, a, margin_)
-                                               : max_separation(b, a, margin_, sat_scratch_.data());
+                                               : max_separation(b, a, sat_scratch_.data());
   if (sep_b > margin_) return;
 
   Contact* existing = contact_index >= 0 ? &contacts_[contact_index] : nullptr;
@@ -527,12 +527,11 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
 
   int inc_edge = 0;
   double most_opposed = std::numeric_limits<double>::infinity();
-  for (int e = 0; e < ni; ++e) {
+  for (int e = 0; e < ni; ++e) {  // selects, not branches: the winning edge varies from pair to pair
     const double c = inc.world_normals[e].dot(normal);
-    if (c < most_opposed) {
-      most_opposed = c;
-      inc_edge = e;
-    }
+    const bool more = c < most_opposed;
+    most_opposed = more ? c : most_opposed;
+    inc_edge = more ? e : inc_edge;
   }
   const bool edge_contact = -most_opposed >= cos_edge_tolerance_;
 
