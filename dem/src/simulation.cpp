@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cmath>
 #include <limits>
+#include <tuple>
 #include <unordered_map>
 
 namespace demcal::dem {
@@ -101,6 +102,14 @@ struct Contact {
   bool seen = false;    // within the search margin in this step
   std::vector<double> shear;  // stored shear force per node (N)
   std::vector<double> gap;    // last gap per node (m), for reports
+  // The last full separating-axis test of the pair: each way's best edge and its lead over the
+  // second best (m), the two blocks' positions and angles then, and a bound on the distance from
+  // any edge's start to any vertex of the other block (m). See separations_still_valid().
+  bool sat_valid = false;
+  int sat_edge_a = 0, sat_edge_b = 0;
+  double sat_lead_a = 0, sat_lead_b = 0, sat_reach = 0;
+  double sat_angle_a = 0, sat_angle_b = 0;
+  Vec2 sat_position_a = Vec2::Zero(), sat_position_b = Vec2::Zero();
   // Joint history since the gauges were zeroed.
   double slip = 0;
   bool ever_touched = false;
@@ -438,9 +447,16 @@ int Engine::group_for(const Body& a, const Body& b, const Vec2& normal) const {
   return 0;
 }
 
-// Largest separation of body q from the edges of body p, and the (first) edge that gives it.
-// Per edge e this is the scalar form
-//   s_e = min over q's vertices v of (v . n_e) - offset_e,  best = the first largest s_e,
+// One way of the separating-axis test: the largest separation of body q from the edges of body p
+// (m), the first edge that gives it, and its lead over the second largest (m; 0 on a tie).
+struct Separation {
+  double value = 0;
+  int edge = 0;
+  double lead = 0;
+};
+
+// Per edge e the scalar form is
+//   s_e = min over q's vertices v of (v . n_e) - offset_e,  value = the first largest s_e,
 // computed with the vertex loop outside and the edge loop inside, over plain arrays: the edge loop
 // vectorises, and each s_e still takes its minimum over the vertices in the same order: the same
 // bits as max_separation_reference below, which stops at the first edge beyond the search margin
@@ -448,7 +464,7 @@ int Engine::group_for(const Body& a, const Body& b, const Vec2& normal) const {
 // N, M > 0: p's and q's vertex counts known at compile time (quadrilaterals, the common case, are
 // unrolled completely); 0: read from the bodies.
 template <int N, int M>
-static std::pair<double, int> max_separation(const Body& p, const Body& q, double* __restrict scratch) {
+static Separation max_separation(const Body& p, const Body& q, double* __restrict scratch) {
   const int n = N > 0 ? N : static_cast<int>(p.world_x.size()), m = M > 0 ? M : static_cast<int>(q.world_x.size());
   const double* __restrict nx = p.normal_x.data();
   const double* __restrict ny = p.normal_y.data();
@@ -458,22 +474,49 @@ static std::pair<double, int> max_separation(const Body& p, const Body& q, doubl
     const double x = q.world_x[v], y = q.world_y[v];
     for (int e = 0; e < n; ++e) s[e] = std::min(s[e], x * nx[e] + y * ny[e]);
   }
-  // The first largest separation, by selects rather than branches (which edge wins varies from pair
-  // to pair, so a branch would often be mispredicted).
-  double best = -std::numeric_limits<double>::infinity();
+  // The first largest separation and the runner-up, by selects rather than branches (which edge
+  // wins varies from pair to pair, so a branch would often be mispredicted).
+  double best = -std::numeric_limits<double>::infinity(), second = best;
   int best_edge = 0;
   for (int e = 0; e < n; ++e) {
     const double separation = s[e] - p.edge_offset[e];
     const bool larger = separation > best;
+    second = larger ? best : std::max(second, separation);
     best = larger ? separation : best;
     best_edge = larger ? e : best_edge;
   }
-  return {best, best_edge};
+  return {best, best_edge, best - second};
 }
 
-static std::pair<double, int> max_separation(const Body& p, const Body& q, double* scratch) {
+static Separation max_separation(const Body& p, const Body& q, double* scratch) {
   if (p.world_x.size() == 4 && q.world_x.size() == 4) return max_separation<4, 4>(p, q, scratch);
   return max_separation<0, 0>(p, q, scratch);
+}
+
+// s_e of max_separation for one edge e, with the same operations in the same order (the same bits).
+static double edge_separation(const Body& p, const Body& q, int e) {
+  const double nx = p.normal_x[e], ny = p.normal_y[e];
+  double s = std::numeric_limits<double>::infinity();
+  const int m = static_cast<int>(q.world_x.size());
+  for (int v = 0; v < m; ++v) s = std::min(s, q.world_x[v] * nx + q.world_y[v] * ny);
+  return s - p.edge_offset[e];
+}
+
+// Whether the best edges of the contact's last full separating-axis test are still the best ones
+// both ways, proven from how far the blocks have moved since: every vertex of a block has moved by at
+// most d = |dx| + |dy| + |dθ| R (R: its farthest vertex from the centroid), and an edge normal has
+// turned by |dθ| of its block, so each separation s_e (a vertex minus an edge start, along the
+// normal, at most `reach` long) has changed by at most B = d_a + d_b + |dθ_p| reach. The best edge
+// keeps its place while its lead over the second best exceeds 2 B (plus 1 nm for rounding); its own
+// separation is then recomputed exactly (edge_separation), which gives the bits of a full test.
+static bool separations_still_valid(const Body& a, const Body& b, const Contact& c) {
+  if (!c.sat_valid) return false;
+  const double turn_a = std::abs(a.angle - c.sat_angle_a), turn_b = std::abs(b.angle - c.sat_angle_b);
+  const double moved = (a.position - c.sat_position_a).cwiseAbs().sum() + turn_a * a.radius +
+                       (b.position - c.sat_position_b).cwiseAbs().sum() + turn_b * b.radius;
+  constexpr double rounding = 1e-9;
+  return c.sat_lead_a > 2 * (moved + turn_a * c.sat_reach) + rounding &&
+         c.sat_lead_b > 2 * (moved + turn_b * c.sat_reach) + rounding;
 }
 
 // The separating-axis test of the reference path (DEMCAL_ENGINE_PATH=reference), edge by edge.
@@ -501,14 +544,28 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   Body& a = bodies_[ia];
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
-  const auto [sep_a, edge_a] = reference_path_ ? max_separation_reference(a, b, margin_)
-                                               : max_separation(a, b, sat_scratch_.data());
-  if (sep_a > margin_) return;
-  const auto [sep_b, edge_b] = reference_path_ ? max_separation_reference(b, a, margin_)
-                                               : max_separation(b, a, sat_scratch_.data());
-  if (sep_b > margin_) return;
-
+  // Separating-axis test: the full test, or for a contact whose best edges are proven unchanged since
+  // its last full test, only those two edges' separations (the same values).
   Contact* existing = contact_index >= 0 ? &contacts_[contact_index] : nullptr;
+  Separation from_a, from_b;
+  const bool full_test = reference_path_ || existing == nullptr || !separations_still_valid(a, b, *existing);
+  if (reference_path_) {
+    std::tie(from_a.value, from_a.edge) = max_separation_reference(a, b, margin_);
+    if (from_a.value > margin_) return;
+    std::tie(from_b.value, from_b.edge) = max_separation_reference(b, a, margin_);
+  } else if (full_test) {
+    from_a = max_separation(a, b, sat_scratch_.data());
+    if (from_a.value > margin_) return;
+    from_b = max_separation(b, a, sat_scratch_.data());
+  } else {
+    from_a = {edge_separation(a, b, existing->sat_edge_a), existing->sat_edge_a, 0};
+    if (from_a.value > margin_) return;
+    from_b = {edge_separation(b, a, existing->sat_edge_b), existing->sat_edge_b, 0};
+  }
+  if (from_b.value > margin_) return;
+  const double sep_a = from_a.value, sep_b = from_b.value;
+  const int edge_a = from_a.edge, edge_b = from_b.edge;
+
   // Reference face: the polygon whose face separates more; hysteresis keeps the previous choice
   // while the two are within a small tolerance (near-parallel faces would otherwise flip).
   const double tolerance = 1e-3 * margin_ + 1e-12;
@@ -592,6 +649,18 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     contacts_.push_back(std::move(c));
   }
   Contact& contact = contacts_[contact_index];
+  if (full_test && !reference_path_) {
+    contact.sat_valid = true;
+    contact.sat_edge_a = edge_a;
+    contact.sat_edge_b = edge_b;
+    contact.sat_lead_a = from_a.lead;
+    contact.sat_lead_b = from_b.lead;
+    contact.sat_reach = (b.position - a.position).norm() + a.radius + b.radius;
+    contact.sat_angle_a = a.angle;
+    contact.sat_angle_b = b.angle;
+    contact.sat_position_a = a.position;
+    contact.sat_position_b = b.position;
+  }
   const int count = static_cast<int>(s_nodes.size());
   const GroupLaw& group = groups_[contact.group];
   if (!contact.active || contact.corner != !edge_contact || static_cast<int>(contact.shear.size()) != count) {
