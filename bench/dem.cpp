@@ -61,6 +61,20 @@ void Wall_SW30_2mm_travel(benchmark::State& state) {
 }
 BENCHMARK(Wall_SW30_2mm_travel)->Unit(benchmark::kMillisecond)->Iterations(2);
 
+// SW.30.1 at the wall campaigns' settings (docs/walls.md): 20 mm/s, 5 points per joint, 33 mm of
+// travel, with its calibrated joints (kn 4.31 GPa/m, ks 0.58 GPa/m, friction 30.1 deg).
+void Wall_SW30_campaign(benchmark::State& state) {
+  WallOptions o;
+  o.kn = 4.31e9;
+  o.ks = 0.58e9;
+  o.friction_deg = 30.1;
+  o.contacts_per_joint = 5;
+  o.velocity = 0.02;
+  o.max_displacement = 0.033;
+  run_scene(state, make_wall(o));
+}
+BENCHMARK(Wall_SW30_campaign)->Unit(benchmark::kMillisecond)->Iterations(2);
+
 // The reference arch (15 points/joint, 10 mm/s) with one effect of the registry switched on at its
 // default values; range(0) indexes effect_registry(). Compare with ReferenceArch_10mm_per_s/15.
 void ReferenceArch_effect(benchmark::State& state) {

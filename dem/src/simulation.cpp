@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cmath>
 #include <limits>
+#include <tuple>
 #include <unordered_map>
 
 namespace demcal::dem {
@@ -36,6 +37,9 @@ struct Body {
   std::vector<Vec2> world;
   std::vector<Vec2> local_normals;  // outward unit normal of edge i (vertex i to i+1) at angle 0
   std::vector<Vec2> world_normals;
+  // The same in plain arrays, for the separating-axis test: vertex coordinates, edge normals and
+  // each edge's offset (its first vertex . its normal), updated with the position.
+  std::vector<double> world_x, world_y, normal_x, normal_y, edge_offset;
   std::vector<double> edge_lengths;
   Vec2 start_position = Vec2::Zero();
   Vec2 position = Vec2::Zero();
@@ -73,6 +77,11 @@ struct Body {
       world_normals[i] = m * local_normals[i];
       box_min = box_min.cwiseMin(world[i]);
       box_max = box_max.cwiseMax(world[i]);
+      world_x[i] = world[i].x();
+      world_y[i] = world[i].y();
+      normal_x[i] = world_normals[i].x();
+      normal_y[i] = world_normals[i].y();
+      edge_offset[i] = world[i].dot(world_normals[i]);
     }
   }
 };
@@ -93,6 +102,14 @@ struct Contact {
   bool seen = false;    // within the search margin in this step
   std::vector<double> shear;  // stored shear force per node (N)
   std::vector<double> gap;    // last gap per node (m), for reports
+  // The last full separating-axis test of the pair: each way's best edge and its lead over the
+  // second best (m), the two blocks' positions and angles then, and a bound on the distance from
+  // any edge's start to any vertex of the other block (m). See separations_still_valid().
+  bool sat_valid = false;
+  int sat_edge_a = 0, sat_edge_b = 0;
+  double sat_lead_a = 0, sat_lead_b = 0, sat_reach = 0;
+  double sat_angle_a = 0, sat_angle_b = 0;
+  Vec2 sat_position_a = Vec2::Zero(), sat_position_b = Vec2::Zero();
   // Joint history since the gauges were zeroed.
   double slip = 0;
   bool ever_touched = false;
@@ -161,9 +178,15 @@ class Engine {
     points_ = scene_.contact.points_per_joint;
     cos_edge_tolerance_ = std::cos(scene_.contact.edge_angle_tolerance);
     margin_ = scene_.contact.search_margin;
+    // The broad phase's skin: a twentieth of the smallest block's box (a few mm for masonry units),
+    // and at least the search margin. Larger means fewer sweeps and more candidates to test.
+    double smallest = std::numeric_limits<double>::infinity();
+    for (const Body& b : bodies_) smallest = std::min(smallest, (b.box_max - b.box_min).minCoeff());
+    skin_ = std::max(margin_, 0.05 * smallest);
     setup_loading();
     setup_gap();
     for (auto* scratch : {&soa_x_, &soa_y_, &soa_area_, &soa_increment_}) scratch->assign(std::max(points_, 1), 0.0);
+    sat_scratch_.assign(max_vertices_, 0.0);
     dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
   }
 
@@ -177,6 +200,10 @@ class Engine {
   double critical_time_step() const;
   int group_for(const Body& a, const Body& b, const Vec2& normal) const;
   void compute_forces();
+  void sweep(double margin);  // pairs_ <- every pair whose boxes, grown by margin, overlap (sorted)
+  bool candidates_stale() const;
+  void sweep_candidates();
+  void reference_broad_phase();
   void process_pair(int ia, int ib, int& contact_index);
   // Geometry of one edge or corner contact's nodes, for the node loop with effects.
   struct NodeLayout {
@@ -212,10 +239,20 @@ class Engine {
   std::vector<GroupLaw> groups_;
   std::vector<Contact> contacts_;                         // every joint ever within the search margin
   std::unordered_map<std::uint64_t, int> contact_index_;  // pair key -> index in contacts_
-  // This step's and the previous step's broad-phase pairs, sorted by key, with their contact's
-  // index (-1: none yet): a pair that stays a pair finds its contact by a merge, without hashing.
-  std::vector<std::pair<std::uint64_t, int>> pair_contacts_, previous_pair_contacts_;
+  // Broad phase with a skin (Verlet list): candidate pairs, swept with the search margin plus
+  // `skin_`, sorted by (first, second), each with its contact's index (-1: none yet); the sweep is
+  // repeated only once a bounding box has moved more than `skin_` / 4 since the last one, and every
+  // step keeps the candidates that pass the exact box test of a sweep with the search margin.
+  struct Candidate {
+    int first = 0, second = 0;
+    int contact = -1;
+  };
+  std::vector<Candidate> candidates_;
+  std::vector<Vec2> swept_min_, swept_max_;  // each body's box at the last sweep
+  double skin_ = 0;
+  long sweeps_ = 0;
   std::vector<std::pair<int, int>> pairs_;
+  std::vector<std::pair<std::uint64_t, int>> pair_contacts_;  // reference path: key, contact index
   std::vector<int> order_;
   int points_ = 15;
   double cos_edge_tolerance_ = 1;
@@ -230,6 +267,8 @@ class Engine {
   // Scratch of the node loop, sized once per joint layout (no allocation in the step).
   std::vector<double> node_s_, node_gap_, node_length_;          // per node: s along the face, gap, length
   std::vector<double> soa_x_, soa_y_, soa_area_, soa_increment_;  // per node: kinematics (stage 1)
+  std::size_t max_vertices_ = 0;    // of any block
+  std::vector<double> sat_scratch_;  // per edge of one block: the separating-axis test's minima
 
   // joint-gap: the pair key and the joint's two ends in the first block's frame.
   bool has_gap_ = false;
@@ -272,6 +311,9 @@ void Engine::build_bodies() {
       body.local_normals.push_back(Vec2(edge.y(), -edge.x()) / edge.norm());
     }
     body.world_normals = body.local_normals;
+    for (auto* soa : {&body.world_x, &body.world_y, &body.normal_x, &body.normal_y, &body.edge_offset})
+      soa->assign(body.local.size(), 0.0);
+    max_vertices_ = std::max(max_vertices_, body.local.size());
     body.position = body.start_position = c;
     body.mass = b.density * scene_.width * geometry::signed_area(b.vertices);
     body.inertia = b.density * scene_.width * geometry::polar_moment(b.vertices);
@@ -405,9 +447,80 @@ int Engine::group_for(const Body& a, const Body& b, const Vec2& normal) const {
   return 0;
 }
 
-// Largest separation of body q from the edges of body p, and the edge that gives it; stops early
-// once a separation beyond `margin` proves the pair apart.
-static std::pair<double, int> max_separation(const Body& p, const Body& q, double margin) {
+// One way of the separating-axis test: the largest separation of body q from the edges of body p
+// (m), the first edge that gives it, and its lead over the second largest (m; 0 on a tie).
+struct Separation {
+  double value = 0;
+  int edge = 0;
+  double lead = 0;
+};
+
+// Per edge e the scalar form is
+//   s_e = min over q's vertices v of (v . n_e) - offset_e,  value = the first largest s_e,
+// computed with the vertex loop outside and the edge loop inside, over plain arrays: the edge loop
+// vectorises, and each s_e still takes its minimum over the vertices in the same order: the same
+// bits as max_separation_reference below, which stops at the first edge beyond the search margin
+// (either way the caller then drops the pair). `scratch` holds p's edge count of doubles.
+// N, M > 0: p's and q's vertex counts known at compile time (quadrilaterals, the common case, are
+// unrolled completely); 0: read from the bodies.
+template <int N, int M>
+static Separation max_separation(const Body& p, const Body& q, double* __restrict scratch) {
+  const int n = N > 0 ? N : static_cast<int>(p.world_x.size()), m = M > 0 ? M : static_cast<int>(q.world_x.size());
+  const double* __restrict nx = p.normal_x.data();
+  const double* __restrict ny = p.normal_y.data();
+  double* __restrict s = scratch;
+  for (int e = 0; e < n; ++e) s[e] = std::numeric_limits<double>::infinity();
+  for (int v = 0; v < m; ++v) {
+    const double x = q.world_x[v], y = q.world_y[v];
+    for (int e = 0; e < n; ++e) s[e] = std::min(s[e], x * nx[e] + y * ny[e]);
+  }
+  // The first largest separation and the runner-up, by selects rather than branches (which edge
+  // wins varies from pair to pair, so a branch would often be mispredicted).
+  double best = -std::numeric_limits<double>::infinity(), second = best;
+  int best_edge = 0;
+  for (int e = 0; e < n; ++e) {
+    const double separation = s[e] - p.edge_offset[e];
+    const bool larger = separation > best;
+    second = larger ? best : std::max(second, separation);
+    best = larger ? separation : best;
+    best_edge = larger ? e : best_edge;
+  }
+  return {best, best_edge, best - second};
+}
+
+static Separation max_separation(const Body& p, const Body& q, double* scratch) {
+  if (p.world_x.size() == 4 && q.world_x.size() == 4) return max_separation<4, 4>(p, q, scratch);
+  return max_separation<0, 0>(p, q, scratch);
+}
+
+// s_e of max_separation for one edge e, with the same operations in the same order (the same bits).
+static double edge_separation(const Body& p, const Body& q, int e) {
+  const double nx = p.normal_x[e], ny = p.normal_y[e];
+  double s = std::numeric_limits<double>::infinity();
+  const int m = static_cast<int>(q.world_x.size());
+  for (int v = 0; v < m; ++v) s = std::min(s, q.world_x[v] * nx + q.world_y[v] * ny);
+  return s - p.edge_offset[e];
+}
+
+// Whether the best edges of the contact's last full separating-axis test are still the best ones
+// both ways, proven from how far the blocks have moved since: every vertex of a block has moved by at
+// most d = |dx| + |dy| + |dθ| R (R: its farthest vertex from the centroid), and an edge normal has
+// turned by |dθ| of its block, so each separation s_e (a vertex minus an edge start, along the
+// normal, at most `reach` long) has changed by at most B = d_a + d_b + |dθ_p| reach. The best edge
+// keeps its place while its lead over the second best exceeds 2 B (plus 1 nm for rounding); its own
+// separation is then recomputed exactly (edge_separation), which gives the bits of a full test.
+static bool separations_still_valid(const Body& a, const Body& b, const Contact& c) {
+  if (!c.sat_valid) return false;
+  const double turn_a = std::abs(a.angle - c.sat_angle_a), turn_b = std::abs(b.angle - c.sat_angle_b);
+  const double moved = (a.position - c.sat_position_a).cwiseAbs().sum() + turn_a * a.radius +
+                       (b.position - c.sat_position_b).cwiseAbs().sum() + turn_b * b.radius;
+  constexpr double rounding = 1e-9;
+  return c.sat_lead_a > 2 * (moved + turn_a * c.sat_reach) + rounding &&
+         c.sat_lead_b > 2 * (moved + turn_b * c.sat_reach) + rounding;
+}
+
+// The separating-axis test of the reference path (DEMCAL_ENGINE_PATH=reference), edge by edge.
+static std::pair<double, int> max_separation_reference(const Body& p, const Body& q, double margin) {
   double best = -std::numeric_limits<double>::infinity();
   int best_edge = 0;
   const int n = static_cast<int>(p.world.size());
@@ -431,12 +544,28 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   Body& a = bodies_[ia];
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
-  const auto [sep_a, edge_a] = max_separation(a, b, margin_);
-  if (sep_a > margin_) return;
-  const auto [sep_b, edge_b] = max_separation(b, a, margin_);
-  if (sep_b > margin_) return;
-
+  // Separating-axis test: the full test, or for a contact whose best edges are proven unchanged since
+  // its last full test, only those two edges' separations (the same values).
   Contact* existing = contact_index >= 0 ? &contacts_[contact_index] : nullptr;
+  Separation from_a, from_b;
+  const bool full_test = reference_path_ || existing == nullptr || !separations_still_valid(a, b, *existing);
+  if (reference_path_) {
+    std::tie(from_a.value, from_a.edge) = max_separation_reference(a, b, margin_);
+    if (from_a.value > margin_) return;
+    std::tie(from_b.value, from_b.edge) = max_separation_reference(b, a, margin_);
+  } else if (full_test) {
+    from_a = max_separation(a, b, sat_scratch_.data());
+    if (from_a.value > margin_) return;
+    from_b = max_separation(b, a, sat_scratch_.data());
+  } else {
+    from_a = {edge_separation(a, b, existing->sat_edge_a), existing->sat_edge_a, 0};
+    if (from_a.value > margin_) return;
+    from_b = {edge_separation(b, a, existing->sat_edge_b), existing->sat_edge_b, 0};
+  }
+  if (from_b.value > margin_) return;
+  const double sep_a = from_a.value, sep_b = from_b.value;
+  const int edge_a = from_a.edge, edge_b = from_b.edge;
+
   // Reference face: the polygon whose face separates more; hysteresis keeps the previous choice
   // while the two are within a small tolerance (near-parallel faces would otherwise flip).
   const double tolerance = 1e-3 * margin_ + 1e-12;
@@ -455,12 +584,11 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
 
   int inc_edge = 0;
   double most_opposed = std::numeric_limits<double>::infinity();
-  for (int e = 0; e < ni; ++e) {
+  for (int e = 0; e < ni; ++e) {  // selects, not branches: the winning edge varies from pair to pair
     const double c = inc.world_normals[e].dot(normal);
-    if (c < most_opposed) {
-      most_opposed = c;
-      inc_edge = e;
-    }
+    const bool more = c < most_opposed;
+    most_opposed = more ? c : most_opposed;
+    inc_edge = more ? e : inc_edge;
   }
   const bool edge_contact = -most_opposed >= cos_edge_tolerance_;
 
@@ -469,7 +597,7 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   std::vector<double>& gaps = node_gap_;
   std::vector<double>& lengths = node_length_;
   if (edge_contact) {
-    const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[(inc_edge + 1) % ni];
+    const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[inc_edge + 1 < ni ? inc_edge + 1 : 0];  // no integer division
     const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
     const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(ref_length, std::max(s1, s2));
     if (hi - lo <= 1e-9 * ref_length) return;
@@ -502,8 +630,9 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     }
     const double s = (inc.world[deepest] - r1).dot(tr);
     if (s < 0 || s > ref_length) return;
-    const double shorter = std::min((inc.world[(deepest + 1) % ni] - inc.world[deepest]).norm(),
-                                    (inc.world[(deepest + ni - 1) % ni] - inc.world[deepest]).norm());
+    const int next = deepest + 1 < ni ? deepest + 1 : 0, previous = deepest > 0 ? deepest - 1 : ni - 1;
+    const double shorter = std::min((inc.world[next] - inc.world[deepest]).norm(),
+                                    (inc.world[previous] - inc.world[deepest]).norm());
     s_nodes.assign(1, s);
     gaps.assign(1, depth);
     lengths.assign(1, shorter / (2.0 * (points_ - 1)));
@@ -520,6 +649,18 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     contacts_.push_back(std::move(c));
   }
   Contact& contact = contacts_[contact_index];
+  if (full_test && !reference_path_) {
+    contact.sat_valid = true;
+    contact.sat_edge_a = edge_a;
+    contact.sat_edge_b = edge_b;
+    contact.sat_lead_a = from_a.lead;
+    contact.sat_lead_b = from_b.lead;
+    contact.sat_reach = (b.position - a.position).norm() + a.radius + b.radius;
+    contact.sat_angle_a = a.angle;
+    contact.sat_angle_b = b.angle;
+    contact.sat_position_a = a.position;
+    contact.sat_position_b = b.position;
+  }
   const int count = static_cast<int>(s_nodes.size());
   const GroupLaw& group = groups_[contact.group];
   if (!contact.active || contact.corner != !edge_contact || static_cast<int>(contact.shear.size()) != count) {
@@ -716,6 +857,82 @@ void Engine::process_nodes_with_effects(Body& a, Body& b, Contact& contact, cons
   apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
 }
 
+// The broad phase's exact test: the two boxes, grown by `margin`, overlap along x and along y. It is
+// the test of the sweep below (which sorts by box_min.x and stops at the first box beyond reach).
+static bool boxes_within(const Body& p, const Body& q, double margin) {
+  return !(q.box_min.x() > p.box_max.x() + margin || p.box_min.x() > q.box_max.x() + margin ||
+           q.box_min.y() > p.box_max.y() + margin || p.box_min.y() > q.box_max.y() + margin);
+}
+
+// Sweep along x over the bounding boxes grown by `margin`: pairs_ gets every pair (first < second)
+// within reach that is not two fixed blocks, sorted.
+void Engine::sweep(double margin) {
+  order_.resize(bodies_.size());
+  for (std::size_t i = 0; i < bodies_.size(); ++i) order_[i] = static_cast<int>(i);
+  std::sort(order_.begin(), order_.end(), [&](int i, int j) {
+    return bodies_[i].box_min.x() < bodies_[j].box_min.x() || (bodies_[i].box_min.x() == bodies_[j].box_min.x() && i < j);
+  });
+  pairs_.clear();
+  for (std::size_t p = 0; p < order_.size(); ++p) {
+    const Body& bi = bodies_[order_[p]];
+    for (std::size_t q = p + 1; q < order_.size(); ++q) {
+      const Body& bj = bodies_[order_[q]];
+      if (bj.box_min.x() > bi.box_max.x() + margin) break;
+      if (bi.fixed && bj.fixed) continue;
+      if (bj.box_min.y() > bi.box_max.y() + margin || bi.box_min.y() > bj.box_max.y() + margin) continue;
+      pairs_.emplace_back(std::min(order_[p], order_[q]), std::max(order_[p], order_[q]));
+    }
+  }
+  std::sort(pairs_.begin(), pairs_.end());
+}
+
+// The candidates stay a superset of this step's pairs while no box coordinate has moved more than
+// d = skin / 4 since their sweep: a pair within `margin` now was within margin + 2 d < margin + skin
+// then (the factor 2 left over covers rounding).
+bool Engine::candidates_stale() const {
+  if (swept_min_.size() != bodies_.size()) return true;
+  const double limit = 0.25 * skin_;
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    const Body& b = bodies_[i];
+    if ((b.box_min - swept_min_[i]).cwiseAbs().maxCoeff() > limit || (b.box_max - swept_max_[i]).cwiseAbs().maxCoeff() > limit)
+      return true;
+  }
+  return false;
+}
+
+// A new candidate list: a sweep with the search margin plus the skin; each candidate finds its
+// contact through the hash map (a sweep is rare: once a block has moved a quarter of the skin).
+void Engine::sweep_candidates() {
+  sweep(margin_ + skin_);
+  candidates_.clear();
+  for (const auto& [i, j] : pairs_) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
+    const auto found = contact_index_.find(key);
+    candidates_.push_back({i, j, found == contact_index_.end() ? -1 : found->second});
+  }
+  swept_min_.resize(bodies_.size());
+  swept_max_.resize(bodies_.size());
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    swept_min_[i] = bodies_[i].box_min;
+    swept_max_[i] = bodies_[i].box_max;
+  }
+  ++sweeps_;
+}
+
+// The broad phase as the engine ran it before the candidate list (DEMCAL_ENGINE_PATH=reference): a
+// sweep with the search margin every step and a hash look-up of every pair's contact.
+void Engine::reference_broad_phase() {
+  sweep(margin_);
+  pair_contacts_.clear();
+  for (const auto& [i, j] : pairs_) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
+    const auto found = contact_index_.find(key);
+    pair_contacts_.emplace_back(key, found == contact_index_.end() ? -1 : found->second);
+  }
+  for (Contact& c : contacts_) c.seen = false;
+  for (std::size_t p = 0; p < pairs_.size(); ++p) process_pair(pairs_[p].first, pairs_[p].second, pair_contacts_[p].second);
+}
+
 void Engine::compute_forces() {
   for (Body& b : bodies_) {
     b.force = b.weight;
@@ -741,42 +958,14 @@ void Engine::compute_forces() {
     b.torque += cross(p - b.position, force);
   }
 
-  // Broad phase: sweep along x over bounding boxes grown by the search margin.
-  order_.resize(bodies_.size());
-  for (std::size_t i = 0; i < bodies_.size(); ++i) order_[i] = static_cast<int>(i);
-  std::sort(order_.begin(), order_.end(), [&](int i, int j) {
-    return bodies_[i].box_min.x() < bodies_[j].box_min.x() || (bodies_[i].box_min.x() == bodies_[j].box_min.x() && i < j);
-  });
-  pairs_.clear();
-  for (std::size_t p = 0; p < order_.size(); ++p) {
-    const Body& bi = bodies_[order_[p]];
-    for (std::size_t q = p + 1; q < order_.size(); ++q) {
-      const Body& bj = bodies_[order_[q]];
-      if (bj.box_min.x() > bi.box_max.x() + margin_) break;
-      if (bi.fixed && bj.fixed) continue;
-      if (bj.box_min.y() > bi.box_max.y() + margin_ || bi.box_min.y() > bj.box_max.y() + margin_) continue;
-      pairs_.emplace_back(std::min(order_[p], order_[q]), std::max(order_[p], order_[q]));
-    }
+  if (reference_path_) {
+    reference_broad_phase();
+  } else {
+    if (candidates_stale()) sweep_candidates();
+    for (Contact& c : contacts_) c.seen = false;
+    for (Candidate& c : candidates_)
+      if (boxes_within(bodies_[c.first], bodies_[c.second], margin_)) process_pair(c.first, c.second, c.contact);
   }
-  std::sort(pairs_.begin(), pairs_.end());
-  // Each pair's contact: found in the previous step's list by a merge (both sorted by key), or by a
-  // hash look-up for a pair new to the broad phase (the reference path looks up every pair).
-  pair_contacts_.clear();
-  std::size_t previous = 0;
-  for (const auto& [i, j] : pairs_) {
-    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
-    int index = -1;
-    while (previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first < key) ++previous;
-    if (!reference_path_ && previous < previous_pair_contacts_.size() && previous_pair_contacts_[previous].first == key) {
-      index = previous_pair_contacts_[previous].second;
-    } else if (const auto found = contact_index_.find(key); found != contact_index_.end()) {
-      index = found->second;
-    }
-    pair_contacts_.emplace_back(key, index);
-  }
-  for (Contact& c : contacts_) c.seen = false;
-  for (std::size_t p = 0; p < pairs_.size(); ++p) process_pair(pairs_[p].first, pairs_[p].second, pair_contacts_[p].second);
-  std::swap(pair_contacts_, previous_pair_contacts_);
   first_step_ = false;
   for (Contact& c : contacts_) {
     c.active = c.seen;

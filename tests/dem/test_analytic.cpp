@@ -56,6 +56,20 @@ TEST(Incline, SticksWhileTangentBelowFriction) {
   EXPECT_LT(std::abs(block_named(r, "block").displacement.x()), 1e-4);
 }
 
+TEST(ContactDetection, BlockDroppedFromBeyondTheBroadPhaseSkinLandsAndRests) {
+  // The broad phase keeps candidate pairs from a sweep with the search margin (1 mm) plus a skin
+  // (a twentieth of the smallest block, 5 mm here) and sweeps again once a block has moved a
+  // quarter of the skin. A block starting 30 mm above the base is not a candidate at first; it must
+  // still find the base, come to rest on it (equilibrium) and press it by its weight only.
+  Scene s = block_on_base(0.2, 0.1, 0, 30);
+  for (auto& v : s.blocks[1].vertices) v.y() += 0.03;
+  s.solver.max_equilibrium_time = 5;
+  const Recording r = simulate(s);
+  EXPECT_EQ(r.status, RunStatus::completed) << r.message;
+  const double closure = 2000 * 0.1 * g / 1e9;  // W / (kn A) = ρ h g / kn, about 2 um
+  EXPECT_NEAR(block_named(r, "block").displacement.y(), -0.03 - closure, 0.1 * closure);
+}
+
 TEST(Incline, SlidesJustAboveFriction) {
   Scene s = block_on_base(0.2, 0.1, std::atan(1.02 * std::tan(30 * kDeg)), 30);
   s.solver.max_equilibrium_time = 2;
