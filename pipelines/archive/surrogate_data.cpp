@@ -1,5 +1,6 @@
 #include "demcal/pipelines/surrogate_data.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 
@@ -66,6 +67,12 @@ std::vector<surrogate::TrainingRow> archive_training_rows(const RunArchive& arch
     if (!complete) continue;
     rows.push_back({std::move(unit), std::isfinite(fitness) ? fitness : std::numeric_limits<double>::quiet_NaN()});
   }
+  // Run ids follow the order in which parallel runs finished; the rows must not, or a model trained
+  // on them (and every choice made with it) would depend on the machine's load.
+  std::sort(rows.begin(), rows.end(), [](const surrogate::TrainingRow& a, const surrogate::TrainingRow& b) {
+    return std::lexicographical_compare(a.unit.data(), a.unit.data() + a.unit.size(), b.unit.data(),
+                                        b.unit.data() + b.unit.size());
+  });
   return rows;
 }
 

@@ -122,6 +122,40 @@ TEST(SurrogateData, ReadsExactlyTheFinishedRunsOfOneSceneHash) {
   EXPECT_EQ(joined[0].fitness, 10.0 + 2.0 * 5.0);
 }
 
+// Parallel runs are archived in the order they finish; the rows (and every model fitted to them) must
+// not depend on that order.
+TEST(SurrogateData, RowsDoNotDependOnTheOrderRunsFinished) {
+  const auto dir = fresh_dir("finish-order");
+  optimise::ParameterSpace space;
+  space.add("kn", 1e8, 1e10, optimise::ParameterSpec::Scale::log10).add("friction_deg", 25, 45);
+  const std::vector<std::pair<double, double>> points = {{3e9, 30}, {1e9, 41}, {5e8, 27}, {1e9, 33}};
+  auto rows_in_order = [&](const std::string& name, const std::vector<size_t>& order) {
+    RunArchive archive((dir / name).string());
+    for (size_t i : order) {
+      RunRecord r;
+      r.model_hash = "scene";
+      r.params = {{"kn", points[i].first}, {"friction_deg", points[i].second}};
+      r.code_version = "test";
+      r.backend = "threads";
+      r.status = "completed";
+      FitnessRecord f;
+      f.run_id = archive.insert_run(r);
+      f.objective_key = "obj";
+      f.fitness = static_cast<double>(i) + 1.0;
+      archive.put_fitness(f);
+    }
+    return archive_training_rows(archive, space, {{"scene", "obj", 1.0}});
+  };
+  const auto forward = rows_in_order("forward.sqlite", {0, 1, 2, 3});
+  const auto shuffled = rows_in_order("shuffled.sqlite", {2, 0, 3, 1});
+  ASSERT_EQ(forward.size(), points.size());
+  ASSERT_EQ(shuffled.size(), points.size());
+  for (size_t i = 0; i < forward.size(); ++i) {
+    EXPECT_EQ(forward[i].unit, shuffled[i].unit) << "row " << i;
+    EXPECT_EQ(forward[i].fitness, shuffled[i].fitness) << "row " << i;
+  }
+}
+
 // The archive and the optimiser hold simulated values only; the budget counts simulations; a second
 // campaign on the same archive starts warm (its first iteration is already screened).
 TEST(SurrogateCampaign, ArchiveAndOptimiserNeverHoldAPrediction) {
@@ -163,10 +197,16 @@ TEST(SurrogateCampaign, ArchiveAndOptimiserNeverHoldAPrediction) {
   // Every value in every saved optimiser state is simulated (or the +inf of "nothing yet").
   for (const auto& it : archive.iterations(campaign->id)) {
     const json state = json::parse(it.optimiser_state).at("optimiser");
-    for (const char* key : {"fx", "fp"})
-      for (const auto& v : state.at(key))
-        if (v.is_number()) EXPECT_TRUE(simulated.count(v.get<double>())) << key << " holds " << v;
-    if (state.at("best_value").is_number()) EXPECT_TRUE(simulated.count(state.at("best_value").get<double>()));
+    for (const char* key : {"fx", "fp"}) {
+      for (const auto& v : state.at(key)) {
+        if (v.is_number()) {
+          EXPECT_TRUE(simulated.count(v.get<double>())) << key << " holds " << v;
+        }
+      }
+    }
+    if (state.at("best_value").is_number()) {
+      EXPECT_TRUE(simulated.count(state.at("best_value").get<double>()));
+    }
   }
 
   // A second campaign (another seed) on the same archive: warm from the first one's 36 runs.

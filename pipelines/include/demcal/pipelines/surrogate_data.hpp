@@ -28,7 +28,8 @@ struct ArchivedCase {
 //   fixed values equal and the tied value equal to source / ratio (relative 1e-12); others are
 //   runs of a different calibration of the same scene and are skipped;
 // - runs with status "cancelled" are skipped (they say nothing about the parameters);
-// - ordered by the run id of the first case.
+// - ordered by their unit point (lexicographic), not by run id: parallel runs get their ids in the
+//   order they finish, and a model must not depend on that.
 std::vector<surrogate::TrainingRow> archive_training_rows(const RunArchive& archive,
                                                           const optimise::ParameterSpace& space,
                                                           const std::vector<ArchivedCase>& cases,
