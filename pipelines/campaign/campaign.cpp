@@ -254,10 +254,17 @@ struct CampaignProgress {
 void plan_progress(const CampaignContext& ctx, const CampaignOptimisers& optimisers, ProgressState& progress) {
   const auto& config = ctx.config;
   const long budget = config.optimiser.evaluation_budget();
-  const int planned_iterations = static_cast<int>((budget + config.optimiser.population - 1) / config.optimiser.population);
   const long polish_budget = config.polish.enabled ? config.polish.options.max_evaluations : 0;
   const long cases = static_cast<long>(config.cases.size());
-  progress.iterations = planned_iterations + static_cast<int>(polish_budget);
+  // Iterations are known in advance for a swarm or GA (a batch each) and for NLopt (one point
+  // each), not for `bo`, whose first batch is its design; the polish asks one point at a time.
+  const std::string& algorithm = config.optimiser.algorithm;
+  long batch = 0;
+  if (algorithm.rfind("nlopt:", 0) == 0) batch = 1;
+  else if (algorithm != "bo")
+    batch = ctx.surrogate.screening && config.surrogate.options.k > 0 ? config.surrogate.options.k
+                                                                       : config.optimiser.population;
+  progress.iterations = batch > 0 ? static_cast<int>((budget + batch - 1) / batch + polish_budget) : 0;
   progress.total = (budget + polish_budget) * cases;
   progress.done = static_cast<long>(ctx.archive.evaluations(ctx.campaign_id).size()) * cases;
   progress.best = optimisers.main().best_value();

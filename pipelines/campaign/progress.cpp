@@ -23,12 +23,17 @@ std::string format_progress(const ProgressState& st) {
   std::string left = "?";
   if (st.done_this_session > 0 && st.total >= st.done) {
     const double per_simulation = st.elapsed_s / static_cast<double>(st.done_this_session);
-    left = "~" + format_duration(per_simulation * static_cast<double>(st.total - st.done));
+    left = "~";
+    left += format_duration(per_simulation * static_cast<double>(st.total - st.done));
   }
+  char iteration[48];
+  if (st.iterations > 0 && st.iteration <= st.iterations)
+    std::snprintf(iteration, sizeof iteration, "%d/%d", st.iteration, st.iterations);
+  else
+    std::snprintf(iteration, sizeof iteration, "%d", st.iteration);
   char line[256];
-  std::snprintf(line, sizeof line, "iteration %d/%d  simulations %ld/%ld  best %s  elapsed %s  left %s",
-                st.iteration, st.iterations, st.done, st.total, best, format_duration(st.elapsed_s).c_str(),
-                left.c_str());
+  std::snprintf(line, sizeof line, "iteration %s  simulations %ld/%ld  best %s  elapsed %s  left %s", iteration,
+                st.done, st.total, best, format_duration(st.elapsed_s).c_str(), left.c_str());
   return line;
 }
 

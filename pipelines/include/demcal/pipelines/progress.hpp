@@ -11,7 +11,7 @@ namespace demcal::pipelines {
 
 struct ProgressState {
   int iteration = 0;          // 1-based, the iteration being evaluated
-  int iterations = 0;         // planned
+  int iterations = 0;         // planned; 0 = not known in advance (`bo`): printed without "/N"
   long done = 0;              // simulations done (simulated or read from the archive)
   long total = 0;             // simulations planned
   double best = 0;            // best fitness so far (NaN/inf before any)
@@ -19,7 +19,8 @@ struct ProgressState {
   long done_this_session = 0; // simulations finished in this session (for the rate)
 };
 
-// "iteration 3/20  simulations 30/200  best 123.4  elapsed 12 s  left ~1 min 08 s"
+// "iteration 3/20  simulations 30/200  best 123.4  elapsed 12 s  left ~1 min 08 s"; the "/20" only
+// while the plan is known and not passed.
 std::string format_progress(const ProgressState& state);
 // "1 h 02 min", "3 min 05 s", "42 s"
 std::string format_duration(double seconds);
