@@ -58,9 +58,9 @@ CampaignConfig tiny_wall_campaign(const fs::path& out) {
 
 TEST(Walls, EveryBundledCampaignParsesValidatesAndMatchesItsTest) {
   const auto files = campaign_files();
-  // 7 walls, the beam-rotation and 10-course trials, SW.200.1 with the crushing cap, the worth test
-  // and its prediction.
-  ASSERT_EQ(files.size(), 12u);
+  // 7 walls, the beam-rotation and 10-course trials, SW.200.1 with the crushing cap, the worth test,
+  // its prediction and the diagnosis fitted on the worth test's walls with the other two held out.
+  ASSERT_EQ(files.size(), 13u);
   EXPECT_TRUE(fs::exists(kWalls / "LICENSE"));
   EXPECT_TRUE(fs::exists(kWalls / "README.md"));
   std::set<std::string> walls_seen;
