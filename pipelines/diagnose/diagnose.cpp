@@ -108,7 +108,7 @@ class CaseRunner {
  public:
   CaseRunner(const CampaignConfig& config, const std::vector<std::string>& held_out_cases)
       : held_out_cases_(held_out_cases) {
-    for (const auto& c : config.cases) measured_.push_back(load_measured(c.measured));
+    for (const auto& c : config.cases) measured_.emplace(c.name, load_measured(c.measured));
   }
 
   // Simulates `params` on `config` (the base or an extended model). With `grid` (the base
@@ -125,7 +125,13 @@ class CaseRunner {
         e.message = "case " + p.name + ": " + p.status + (p.message.empty() ? "" : " (" + p.message + ")");
         return e;
       }
-      const auto channels = smoothing::common_channels(measured_[k], p.simulated, config.objective_options);
+      const auto found = measured_.find(p.name);
+      if (found == measured_.end()) {
+        e.message = "case " + p.name + " is not a case of the campaign";
+        return e;
+      }
+      const smoothing::Curve& measured = found->second;
+      const auto channels = smoothing::common_channels(measured, p.simulated, config.objective_options);
       const bool case_held_out =
           std::find(held_out_cases_.begin(), held_out_cases_.end(), p.name) != held_out_cases_.end();
       for (const auto& ch : channels) {
@@ -134,7 +140,7 @@ class CaseRunner {
         if (case_held_out || (weight != config.objective_options.channel_weights.end() && weight->second == 0)) {
           // not fitted: a check of the fit, on its own grid
           try {
-            ChannelResidual r = analyse_channel(smoothing::series(measured_[k], ch, config.objective_options.force_column),
+            ChannelResidual r = analyse_channel(smoothing::series(measured, ch, config.objective_options.force_column),
                                                 sim, config.objective_options.points);
             r.case_name = p.name;
             r.channel = ch;
@@ -152,7 +158,7 @@ class CaseRunner {
           }
           r = resimulated((*grid)[g++], sim);
         } else {
-          r = analyse_channel(smoothing::series(measured_[k], ch, config.objective_options.force_column), sim,
+          r = analyse_channel(smoothing::series(measured, ch, config.objective_options.force_column), sim,
                               config.objective_options.points);
         }
         r.case_name = p.name;
@@ -170,7 +176,7 @@ class CaseRunner {
   void add_simulations(long n) { simulations_ += n; }
 
  private:
-  std::vector<smoothing::Curve> measured_;
+  std::map<std::string, smoothing::Curve> measured_;  // by case name
   std::vector<std::string> held_out_cases_;
   long simulations_ = 0;
 };
@@ -782,7 +788,10 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.simulations = r.simulated_this_session;
         c.params = r.best.params;
         c.fitness = r.best.fitness;
-        const Evaluation e = runner.evaluate(ext, complete_parameters(ext, r.best.params), &base.residuals);
+        // on every case, the held-out ones included: the fit is judged on the data it did not use too
+        CampaignConfig judged = ext;
+        judged.cases = m.config.cases;
+        const Evaluation e = runner.evaluate(judged, complete_parameters(ext, r.best.params), &base.residuals);
         if (!e.ok) {
           c.reason = "its best set cannot be re-simulated: " + e.message;
           continue;

@@ -277,9 +277,11 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   // Bad input first: an unknown effect is named in the message, before any simulation.
   const fs::path dir = test_support::fresh_dir("diagnose", "cli");
   const fs::path measured = make_measurement({}, dir, 2);
+  // two cases of the same test: "main" is fitted, "check" is held out (--held-out check below)
+  const json scene = {{"generator", "arch"}, {"options", {{"contacts_per_joint", 5}, {"velocity", 0.005}, {"max_displacement", 0.008}}}};
   json j = {{"name", "cli"},
-            {"scene", {{"generator", "arch"}, {"options", {{"contacts_per_joint", 5}, {"velocity", 0.005}, {"max_displacement", 0.008}}}}},
-            {"measured", measured.string()},
+            {"cases", {{{"name", "main"}, {"scene", scene}, {"measured", measured.string()}},
+                       {{"name", "check"}, {"scene", scene}, {"measured", measured.string()}}}},
             {"parameters", {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
             {"fixed", {{"kn", 2.6e9}, {"ks", 0.9e9}}},
             {"objective", {{"type", 1}, {"weights", {{"abutment_horizontal", 0}}}}},
@@ -294,7 +296,7 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   while (fgets(buf, sizeof buf, pipe)) text += buf;
   EXPECT_NE(pclose(pipe), 0);
   EXPECT_NE(text.find("moss"), std::string::npos) << text;
-  for (const char* held_out : {"nowhere", "main"}) {  // no such case; the only case
+  for (const char* held_out : {"nowhere", "main,check"}) {  // no such case; every case
     pipe = popen((base + " --held-out " + held_out + " 2>&1").c_str(), "r");
     text.clear();
     while (fgets(buf, sizeof buf, pipe)) text += buf;
@@ -302,18 +304,24 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
     EXPECT_NE(text.find("--held-out"), std::string::npos) << text;
   }
   EXPECT_NE(text.find("every case"), std::string::npos) << text;
-  ASSERT_EQ(std::system((base + " --effects support-compliance --candidates 1 --candidate-simulations 8 > /dev/null 2>&1").c_str()), 0);
+  ASSERT_EQ(std::system((base + " --held-out check --effects support-compliance --candidates 1 --candidate-simulations 8 > /dev/null 2>&1").c_str()), 0);
   const json d = test_support::read_json(dir / "out" / "diagnosis.json");
   EXPECT_TRUE(d["chosen"].is_array());
   EXPECT_TRUE(d["error_before"].is_number());
   // the simulated curve's own scatter, measured on the fitted channel
   ASSERT_TRUE(d["scatter"].contains("main/load_vertical")) << d.dump();
   EXPECT_GE(d["scatter"]["main/load_vertical"].get<double>(), 0.0);
-  // the abutment channel (weight 0) is not fitted: every fit is checked on it
+  // the abutment channel (weight 0) and the held-out case are not fitted: every fit is checked on them
+  EXPECT_FALSE(d["base"]["rms"].contains("check/load_vertical")) << d["base"].dump();
   EXPECT_TRUE(d["held_out"]["rms"].contains("main/abutment_horizontal")) << d["held_out"].dump();
+  EXPECT_TRUE(d["held_out"]["rms"].contains("check/load_vertical")) << d["held_out"].dump();
   EXPECT_TRUE(d["held_out"]["error"].is_number());
+  int tried = 0;
   for (const auto& c : d["candidates"])
     if (c["tried"].get<bool>()) {
+      ++tried;
       EXPECT_TRUE(c["held_out_error"].is_number()) << c.dump();
+      EXPECT_TRUE(c["held_out_rms"].contains("check/load_vertical")) << c.dump();
     }
+  EXPECT_EQ(tried, 1);
 }
