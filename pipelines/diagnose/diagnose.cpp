@@ -103,6 +103,10 @@ struct Evaluation {
   double held_out_error = Diagnosis::kNaN;
 };
 
+bool is_held_out(const std::string& case_name, const std::vector<std::string>& held_out_cases) {
+  return std::find(held_out_cases.begin(), held_out_cases.end(), case_name) != held_out_cases.end();
+}
+
 // Simulates parameter sets on the campaign's cases and counts the runs.
 class CaseRunner {
  public:
@@ -132,8 +136,7 @@ class CaseRunner {
       }
       const smoothing::Curve& measured = found->second;
       const auto channels = smoothing::common_channels(measured, p.simulated, config.objective_options);
-      const bool case_held_out =
-          std::find(held_out_cases_.begin(), held_out_cases_.end(), p.name) != held_out_cases_.end();
+      const bool case_held_out = is_held_out(p.name, held_out_cases_);
       for (const auto& ch : channels) {
         const auto weight = config.objective_options.channel_weights.find(ch);
         const auto sim = smoothing::series(p.simulated, ch, config.objective_options.force_column);
@@ -205,9 +208,7 @@ std::string diagnosis_archive(const DiagnoseOptions& options) {
 
 // The campaign without its held-out cases: what every calibration of the diagnosis fits.
 CampaignConfig fitted_cases(CampaignConfig config, const DiagnoseOptions& options) {
-  std::erase_if(config.cases, [&](const CaseSpec& c) {
-    return std::find(options.held_out_cases.begin(), options.held_out_cases.end(), c.name) != options.held_out_cases.end();
-  });
+  std::erase_if(config.cases, [&](const CaseSpec& c) { return is_held_out(c.name, options.held_out_cases); });
   return config;
 }
 
@@ -682,7 +683,9 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   }
   d.held_out_error = base.held_out_error;
   const double noise = overall_noise(base.residuals);
-  const double scatter = simulation_scatter(config, base_params, base.residuals, options.scatter_runs, runner, d.scatter);
+  // Scatter, sensitivities and signatures compare fitted curves only: held-out cases are not simulated for them.
+  const CampaignConfig fitted = fitted_cases(config, options);
+  const double scatter = simulation_scatter(fitted, base_params, base.residuals, options.scatter_runs, runner, d.scatter);
   progress(options, "base RMS force error " + format_number(d.error_before) + " N, noise " + format_number(noise) +
                         " N, simulation scatter " + format_number(scatter) + " N");
 
@@ -705,7 +708,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   } else {
     // 3. signatures
     const auto residual = stacked(base.residuals, nullptr);
-    const auto sensitivities = base_sensitivities(config, base_params, base.residuals, runner);
+    const auto sensitivities = base_sensitivities(fitted, base_params, base.residuals, runner);
     std::map<std::string, ExtendedModel> models;
     std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> best probe's parameters
     const dem::Scene first_scene = build_scene(config.cases.front().scene, config.source + ": cases[0].scene");
@@ -729,9 +732,10 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         std::vector<std::vector<double>> signatures;
         std::map<std::string, double> warm;  // the probe closest to the measurement starts the search
         double warm_error = std::numeric_limits<double>::infinity();
+        const CampaignConfig probed = fitted_cases(m.config, options);
         for (const auto& t : probe_points(m.parameter_names.size())) {
           const auto values = effect_values(m, base_params, t);
-          const Evaluation s = runner.evaluate(m.config, values, &base.residuals);
+          const Evaluation s = runner.evaluate(probed, values, &base.residuals);
           if (!s.ok) continue;
           signatures.push_back(stacked(base.residuals, &s.residuals));
           if (s.error < warm_error) {
@@ -789,9 +793,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.params = r.best.params;
         c.fitness = r.best.fitness;
         // on every case, the held-out ones included: the fit is judged on the data it did not use too
-        CampaignConfig judged = ext;
-        judged.cases = m.config.cases;
-        const Evaluation e = runner.evaluate(judged, complete_parameters(ext, r.best.params), &base.residuals);
+        const Evaluation e = runner.evaluate(m.config, complete_parameters(ext, r.best.params), &base.residuals);
         if (!e.ok) {
           c.reason = "its best set cannot be re-simulated: " + e.message;
           continue;
