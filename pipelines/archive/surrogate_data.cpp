@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <stdexcept>
 
 using nlohmann::json;
 
@@ -10,7 +11,103 @@ namespace demcal::pipelines {
 
 namespace {
 bool same(double a, double b) { return a == b || std::abs(a - b) <= 1e-12 * std::max(std::abs(a), std::abs(b)); }
+
 }  // namespace
+
+Eigen::VectorXd archived_outputs(const RunArchive& archive, const std::vector<std::int64_t>& run_ids,
+                                 const std::vector<ArchivedCase>& cases) {
+  if (run_ids.size() != cases.size() || cases.empty()) return {};
+  std::vector<Eigen::VectorXd> parts;
+  Eigen::Index total = 0;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    if (!cases[k].grid) return {};
+    const auto run = archive.run(run_ids[k]);
+    if (!run) return {};
+    parts.push_back(curve_outputs(run->curves, *cases[k].grid));
+    if (parts.back().size() == 0) return {};
+    total += parts.back().size();
+  }
+  Eigen::VectorXd outputs(total);
+  Eigen::Index offset = 0;
+  for (const auto& part : parts) {
+    outputs.segment(offset, part.size()) = part;
+    offset += part.size();
+  }
+  return outputs;
+}
+
+CurveGrid make_curve_grid(const smoothing::Curve& measured, const smoothing::ObjectiveOptions& objective,
+                          const smoothing::Objective2* objective2, double case_weight, int points) {
+  if (points < 2) throw std::invalid_argument("curve grid: points = " + std::to_string(points) + " must be >= 2");
+  CurveGrid grid;
+  grid.force_column = objective.force_column;
+  grid.points = points;
+  grid.objective_points = objective.points;
+  grid.case_weight = case_weight;
+  for (const auto& column : smoothing::displacement_columns(measured, objective)) {
+    const auto envelope = smoothing::loading_envelope(smoothing::series(measured, column, objective.force_column));
+    if (envelope.x.size() < 2) throw smoothing::CurveError(measured.source + ": channel '" + column + "' has fewer than 2 loading points");
+    CurveGrid::Channel c;
+    c.column = column;
+    c.lower = envelope.x.front();
+    c.upper = envelope.x.back();
+    const auto w = objective.channel_weights.find(column);
+    c.weight = w == objective.channel_weights.end() ? 1.0 : w->second;
+    c.measured = objective2 ? objective2->smoothed_experiment().at(column) : smoothing::series(measured, column, objective.force_column);
+    grid.channels.push_back(std::move(c));
+  }
+  if (grid.channels.empty()) throw smoothing::CurveError(measured.source + ": no displacement channel");
+  return grid;
+}
+
+Eigen::VectorXd curve_outputs(const smoothing::Curve& run, const CurveGrid& grid) {
+  Eigen::VectorXd outputs(grid.size());
+  Eigen::Index i = 0;
+  for (const auto& c : grid.channels) {
+    if (!run.has_column(c.column) || !run.has_column(grid.force_column)) return {};
+    const auto envelope = smoothing::loading_envelope(smoothing::series(run, c.column, grid.force_column));
+    if (envelope.x.size() < 2) return {};
+    for (int k = 0; k < grid.points; ++k) outputs[i++] = smoothing::interpolate(envelope, grid.displacement(c, k));
+    outputs[i++] = envelope.x.back();
+  }
+  return outputs;
+}
+
+smoothing::XYSeries output_channel(const Eigen::VectorXd& outputs, Eigen::Index offset, const CurveGrid& grid,
+                                   size_t channel) {
+  const auto& c = grid.channels.at(channel);
+  const Eigen::Index start = offset + static_cast<Eigen::Index>(channel) * (grid.points + 1);
+  const double end = std::clamp(outputs[start + grid.points], grid.displacement(c, 1), c.upper);
+  smoothing::XYSeries s;
+  for (int k = 0; k < grid.points; ++k) {
+    const double w = grid.displacement(c, k);
+    if (w >= end) {
+      // The end point, interpolated between the grid points either side of it.
+      const double before = grid.displacement(c, k - 1);
+      const double t = (end - before) / (w - before);
+      s.x.push_back(end);
+      s.y.push_back(outputs[start + k - 1] + t * (outputs[start + k] - outputs[start + k - 1]));
+      break;
+    }
+    s.x.push_back(w);
+    s.y.push_back(outputs[start + k]);
+  }
+  return s;
+}
+
+double curve_fitness(const Eigen::VectorXd& outputs, const std::vector<std::shared_ptr<const CurveGrid>>& grids) {
+  double fitness = 0;
+  Eigen::Index offset = 0;
+  for (const auto& grid : grids) {
+    double f = 0;
+    for (size_t c = 0; c < grid->channels.size(); ++c)
+      f += grid->channels[c].weight *
+           smoothing::channel_misfit(grid->channels[c].measured, output_channel(outputs, offset, *grid, c), grid->objective_points);
+    fitness += grid->case_weight * f;
+    offset += grid->size();
+  }
+  return fitness;
+}
 
 Eigen::VectorXd unit_point_in_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params) {
   const auto& free = space.free_parameters();
@@ -42,12 +139,13 @@ std::vector<surrogate::TrainingRow> archive_training_rows(const RunArchive& arch
                                                           std::int64_t max_run_id) {
   std::vector<surrogate::TrainingRow> rows;
   if (cases.empty()) return rows;
-  // Later cases: parameter key -> weighted fitness.
-  std::vector<std::map<std::string, double>> others;
+  const bool with_outputs = std::all_of(cases.begin(), cases.end(), [](const ArchivedCase& c) { return c.grid != nullptr; });
+  // Later cases: parameter key -> (fitness, run id).
+  std::vector<std::map<std::string, std::pair<double, std::int64_t>>> others;
   for (size_t k = 1; k < cases.size(); ++k) {
-    std::map<std::string, double> by_key;
+    std::map<std::string, std::pair<double, std::int64_t>> by_key;
     for (const auto& r : archive.run_fitness(cases[k].model_hash, cases[k].objective_key, max_run_id))
-      if (r.status != "cancelled") by_key[parameter_key(r.params)] = r.fitness;
+      if (r.status != "cancelled") by_key[parameter_key(r.params)] = {r.fitness, r.run_id};
     others.push_back(std::move(by_key));
   }
   for (const auto& r : archive.run_fitness(cases[0].model_hash, cases[0].objective_key, max_run_id)) {
@@ -55,17 +153,24 @@ std::vector<surrogate::TrainingRow> archive_training_rows(const RunArchive& arch
     Eigen::VectorXd unit = unit_point_in_space(space, r.params);
     if (unit.size() == 0) continue;
     double fitness = cases[0].weight * r.fitness;
+    std::vector<std::int64_t> run_ids = {r.run_id};
     bool complete = true;
     if (!others.empty()) {
       const std::string key = parameter_key(r.params);
       for (size_t k = 1; k < cases.size() && complete; ++k) {
         const auto it = others[k - 1].find(key);
-        if (it == others[k - 1].end()) complete = false;
-        else fitness += cases[k].weight * it->second;
+        if (it == others[k - 1].end()) {
+          complete = false;
+        } else {
+          fitness += cases[k].weight * it->second.first;
+          run_ids.push_back(it->second.second);
+        }
       }
     }
     if (!complete) continue;
-    rows.push_back({std::move(unit), std::isfinite(fitness) ? fitness : std::numeric_limits<double>::quiet_NaN()});
+    const bool finite = std::isfinite(fitness);
+    rows.push_back({std::move(unit), finite ? fitness : std::numeric_limits<double>::quiet_NaN(),
+                    finite && with_outputs ? archived_outputs(archive, run_ids, cases) : Eigen::VectorXd()});
   }
   // Run ids follow the order in which parallel runs finished; the rows must not, or a model trained
   // on them (and every choice made with it) would depend on the machine's load.
@@ -117,7 +222,7 @@ ArchivedProblem find_archived_problem(const RunArchive& archive, const std::stri
   if (p.campaign_name.empty())
     throw ArchiveError(archive.path() + ": no campaign in the archive ran scene hash " + p.model_hash +
                        " (its parameter space is unknown)");
-  p.rows = archive_training_rows(archive, p.space, {{p.model_hash, p.objective_key, 1.0}});
+  p.rows = archive_training_rows(archive, p.space, {{p.model_hash, p.objective_key, 1.0, nullptr}});
   return p;
 }
 

@@ -85,6 +85,7 @@ struct SurrogateSetup {
   std::int64_t horizon = 0;
   std::vector<ArchivedCase> archived_cases;
   std::optional<surrogate::SurrogateModel> trained_model;
+  surrogate::CurveHooks hooks;  // the "mlp" kind: the fitness of predicted curves, a told point's curves
 };
 
 SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCases& prepared,
@@ -96,8 +97,36 @@ SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCas
   s.horizon = previous && previous->config.contains("surrogate_run_horizon")
                   ? previous->config.at("surrogate_run_horizon").get<std::int64_t>()
                   : archive.max_run_id();
-  for (size_t k = 0; k < config.cases.size(); ++k)
-    s.archived_cases.push_back({backend.model_hash(k), prepared.objective_keys[k], config.cases[k].weight});
+  const bool curves = (s.bayes || s.screening) && config.surrogate.options.kind == "mlp";
+  std::vector<std::shared_ptr<const CurveGrid>> grids;
+  for (size_t k = 0; k < config.cases.size(); ++k) {
+    std::shared_ptr<const CurveGrid> grid;
+    if (curves) {
+      try {
+        grid = std::make_shared<const CurveGrid>(make_curve_grid(prepared.measured[k], config.objective_options,
+                                                                 config.objective == 2 ? prepared.objective2[k].get() : nullptr,
+                                                                 config.cases[k].weight));
+      } catch (const std::exception& e) {
+        throw CampaignError(config.source + ": surrogate kind mlp: " + e.what());
+      }
+      grids.push_back(grid);
+    }
+    s.archived_cases.push_back({backend.model_hash(k), prepared.objective_keys[k], config.cases[k].weight, grid});
+  }
+  if (curves) {
+    s.hooks.fitness = [grids](const Eigen::VectorXd& outputs) { return curve_fitness(outputs, grids); };
+    // A told point's runs, found by the parameters the campaign simulated for it.
+    s.hooks.outputs_at = [&config, &archive, cases = s.archived_cases](const Eigen::VectorXd& unit) {
+      const auto params = config.space.values(config.space.to_physical(unit));
+      std::vector<std::int64_t> run_ids;
+      for (const auto& c : cases) {
+        const auto run = archive.find_run(c.model_hash, params);
+        if (!run) return Eigen::VectorXd();
+        run_ids.push_back(run->id);
+      }
+      return archived_outputs(archive, run_ids, cases);
+    };
+  }
   if (s.screening && !config.surrogate.model_file.empty()) {
     std::ifstream in(config.surrogate.model_file);
     try {
@@ -105,10 +134,14 @@ SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCas
     } catch (const std::exception& e) {
       throw CampaignError(config.surrogate.model_file + ": " + e.what());
     }
-    if (s.trained_model->gp().dimension() != config.space.dimension())
+    if (s.trained_model->dimension() != config.space.dimension())
       throw CampaignError(config.surrogate.model_file + ": the model has " +
-                          std::to_string(s.trained_model->gp().dimension()) + " parameters, the campaign " +
+                          std::to_string(s.trained_model->dimension()) + " parameters, the campaign " +
                           std::to_string(config.space.dimension()));
+    if (s.trained_model->options().kind != config.surrogate.options.kind)
+      throw CampaignError(config.surrogate.model_file + ": a model of kind " + s.trained_model->options().kind +
+                          ", the campaign's surrogate is of kind " + config.surrogate.options.kind);
+    s.trained_model->set_hooks(s.hooks);
   }
   return s;
 }
@@ -123,9 +156,13 @@ std::vector<surrogate::TrainingRow> training_rows(const CampaignConfig& config, 
       rows.push_back(std::move(row));
   };
   for (auto& r : archive_training_rows(archive, config.space, setup.archived_cases, setup.horizon)) add(std::move(r));
+  const bool curves = config.surrogate.options.kind == "mlp";
   for (const auto& e : archive.evaluations(campaign_id)) {
     Eigen::VectorXd unit = unit_point_in_space(config.space, e.params);
-    if (unit.size() > 0) add({std::move(unit), e.fitness});
+    if (unit.size() == 0) continue;
+    Eigen::VectorXd outputs = curves && std::isfinite(e.fitness) ? archived_outputs(archive, e.run_ids, setup.archived_cases)
+                                                                 : Eigen::VectorXd();
+    add({std::move(unit), e.fitness, std::move(outputs)});
   }
   return rows;
 }
@@ -141,7 +178,7 @@ class CampaignOptimisers {
       if (setup.bayes) {
         main_ = surrogate::make_bayes_optimiser(
             config.space, o, config.surrogate.options,
-            archive_training_rows(archive, config.space, setup.archived_cases, setup.horizon));
+            archive_training_rows(archive, config.space, setup.archived_cases, setup.horizon), setup.hooks);
       } else {
         if (setup.screening && config.surrogate.options.k > 0)
           o.evaluations_per_iteration = config.surrogate.options.k;
@@ -294,7 +331,7 @@ std::optional<ProposedBatch> propose_batch(const CampaignContext& ctx, const Cam
   const auto rows = training_rows(config, ctx.surrogate, ctx.archive, ctx.campaign_id);
   long finite = 0;
   for (const auto& r : rows) finite += std::isfinite(r.fitness) ? 1 : 0;
-  surrogate::SurrogateModel model(config.surrogate.options);
+  surrogate::SurrogateModel model(config.surrogate.options, ctx.surrogate.hooks);
   bool usable = false;
   if (ctx.surrogate.trained_model) {
     model = *ctx.surrogate.trained_model;
@@ -311,7 +348,7 @@ std::optional<ProposedBatch> propose_batch(const CampaignContext& ctx, const Cam
   std::sort(p.slots.begin(), p.slots.end());
   p.screen_record = p.screen->to_json();
   p.screen_record["training_rows"] = model.training_rows();
-  p.screen_record["log_transform"] = model.gp().log_transformed();
+  p.screen_record["log_transform"] = model.log_transformed();
   return p;
 }
 
@@ -526,9 +563,13 @@ CampaignResult collect_result(const CampaignContext& ctx, const CampaignOptimise
       result.surrogate_iterations.push_back(std::move(entry));
     }
     if (setup.bayes) result.surrogate_simulated = result.candidates;
-    surrogate::SurrogateModel final_model(config.surrogate.options);
-    if (final_model.fit(training_rows(config, setup, ctx.archive, ctx.campaign_id)))
+    const auto rows = training_rows(config, setup, ctx.archive, ctx.campaign_id);
+    if (config.surrogate.options.kind == "mlp") {
+      const auto cv = surrogate::cross_validate(rows, config.surrogate.options, 5, setup.hooks);
+      if (cv.finite_rows > 0) result.surrogate_cv_error = cv.relative_error;
+    } else if (surrogate::SurrogateModel final_model(config.surrogate.options); final_model.fit(rows)) {
       result.surrogate_cv_error = final_model.gp().leave_one_out().relative_error;
+    }
   }
   if (!std::isfinite(best)) {
     result.status = CampaignStatus::failed;

@@ -1,5 +1,6 @@
 // What a campaign evaluates with: the prepared cases, the backend and the fitness workers.
 #include "campaign_internal.hpp"
+#include "demcal/pipelines/surrogate_data.hpp"
 
 #include "demcal/pipelines/mpi.hpp"
 
@@ -72,6 +73,30 @@ PreparedCases prepare_cases(const CampaignConfig& config) {
   if (config.backend.type != "command") p.scenes = build_scenes(config);
   return p;
 }
+
+}  // namespace demcal::pipelines::detail
+
+namespace demcal::pipelines {
+
+std::vector<CaseCurveGrid> campaign_curve_grids(const CampaignConfig& config) {
+  const detail::PreparedCases prepared = detail::prepare_cases(config);
+  std::vector<CaseCurveGrid> grids;
+  for (size_t k = 0; k < config.cases.size(); ++k) {
+    try {
+      grids.push_back({prepared.objective_keys[k],
+                       std::make_shared<const CurveGrid>(make_curve_grid(
+                           prepared.measured[k], config.objective_options,
+                           config.objective == 2 ? prepared.objective2[k].get() : nullptr, config.cases[k].weight))});
+    } catch (const std::exception& e) {
+      throw CampaignError(config.source + ": case '" + config.cases[k].name + "': " + e.what());
+    }
+  }
+  return grids;
+}
+
+}  // namespace demcal::pipelines
+
+namespace demcal::pipelines::detail {
 
 std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, const PreparedCases& prepared,
                                                 const RunOptions& options) {

@@ -306,6 +306,11 @@ void parse_surrogate(const json& j, SurrogateSpec& spec, const std::string& wher
     if (file.is_relative()) file = fs::path(base_dir) / file;
     spec.model_file = file.string();
     options.erase("model");
+    // Without a "kind", the model's own kind (an unreadable file is reported when it is loaded).
+    std::ifstream in(spec.model_file);
+    const json model_json = json::parse(in, nullptr, false);
+    if (!options.contains("kind") && model_json.is_object() && model_json.contains("kind") && model_json.at("kind").is_string())
+      options["kind"] = model_json.at("kind");
   }
   try {
     spec.options = surrogate::SurrogateOptions::from_json(options, where);

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <iostream>
 #include <memory>
 
@@ -96,9 +97,17 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
     c.surrogate.enabled = false;
   } else if (f.surrogate == "on") {
     c.surrogate.enabled = true;
+  } else if (f.surrogate == "gp" || f.surrogate == "mlp") {
+    c.surrogate.enabled = true;
+    c.surrogate.options.kind = f.surrogate;
   } else if (!f.surrogate.empty()) {
     c.surrogate.enabled = true;
     c.surrogate.model_file = f.surrogate;
+    // The model's kind rules (an unreadable file is reported when the campaign loads it).
+    std::ifstream model(f.surrogate);
+    const nlohmann::json file = nlohmann::json::parse(model, nullptr, false);
+    if (file.is_object() && file.contains("kind") && file.at("kind").is_string())
+      c.surrogate.options.kind = file.at("kind").get<std::string>();
   }
   if (!f.out.empty()) c.output = f.out;
   if (!f.archive.empty()) c.archive = f.archive;
@@ -155,7 +164,7 @@ void setup(CLI::App& app) {
   sub->add_option("--param", flags->params, "NAME=LOWER:UPPER[:log] | NAME=fixed:VALUE | NAME=tied:SOURCE:RATIO (repeatable)");
   sub->add_option("--algorithm", flags->algorithm, "pso | tbpso | ga | nlopt:NAME | bo (Bayesian optimisation)");
   sub->add_option("--surrogate", flags->surrogate,
-                  "Pre-screen candidates with a surrogate: on | off | MODEL (a file from demcal surrogate train)");
+                  "Pre-screen candidates with a surrogate: on | off | gp | mlp (on, of that kind) | MODEL (a file from demcal surrogate train)");
   sub->add_option("--iterations", flags->iterations, "Iterations (generations)");
   sub->add_option("--swarm,--population", flags->swarm, "Candidates per iteration");
   sub->add_option("--max-simulations", flags->max_simulations, "Simulation budget (wins over --iterations; with --surrogate it counts simulations)");

@@ -89,6 +89,71 @@ TrainingOutput train_batched(const TrainingBatch& tb, const SmootherOptions& opt
   return selector.result();
 }
 
+// The regression ensemble (regression_ensemble.hpp): the same batched products and hand-written
+// backpropagation, with every member seeing all rows through its own row weights.
+std::vector<float> train_regression(const RegressionBatch& rb) {
+  torch::NoGradGuard no_grad;
+  const int previous_threads = torch::get_num_threads();
+  torch::set_num_threads(rb.threads);
+
+  const std::int64_t members = rb.members, n = rb.rows;
+  const std::int64_t total = regression_parameter_count(rb.inputs, rb.outputs, rb.hidden_layers, rb.hidden_width);
+  const auto f32 = torch::TensorOptions().dtype(torch::kFloat32);
+  torch::Tensor x = torch::from_blob(const_cast<float*>(rb.x.data()), {1, n, rb.inputs}, f32)
+                        .expand({members, n, rb.inputs}).contiguous();
+  torch::Tensor target = torch::from_blob(const_cast<float*>(rb.y.data()), {1, n, rb.outputs}, f32)
+                             .expand({members, n, rb.outputs}).contiguous();
+  torch::Tensor weight_rows = torch::from_blob(const_cast<float*>(rb.row_weight.data()), {members, n, 1}, f32).clone();
+  // d(loss)/d(output) = 2 w (f − y) / (Σ w × outputs), per member.
+  torch::Tensor scale = weight_rows.mul(2.0).div_(weight_rows.sum(1, true).clamp_min(1e-12).mul_(static_cast<double>(rb.outputs)));
+  torch::Tensor params = torch::from_blob(const_cast<float*>(rb.initial_parameters.data()), {members, total}, f32).clone();
+  torch::Tensor adam_m = torch::zeros_like(params);
+  torch::Tensor adam_v = torch::zeros_like(params);
+
+  std::vector<torch::Tensor> weight, bias, weight_t;
+  std::int64_t offset = 0, in = rb.inputs;
+  for (int l = 0; l <= rb.hidden_layers; ++l) {
+    const std::int64_t out = l < rb.hidden_layers ? rb.hidden_width : rb.outputs;
+    weight.push_back(params.narrow(1, offset, in * out).view({members, in, out}));
+    offset += in * out;
+    bias.push_back(params.narrow(1, offset, out).view({members, 1, out}));
+    offset += out;
+    weight_t.push_back(weight.back().transpose(1, 2));
+    in = out;
+  }
+  const std::size_t layers = weight.size();
+  std::vector<torch::Tensor> activation(layers), grads(2 * layers);
+  for (int epoch = 0; epoch < rb.epochs; ++epoch) {
+    torch::Tensor h = x;
+    for (std::size_t l = 0; l < layers; ++l) {
+      activation[l] = h;
+      torch::Tensor z = torch::baddbmm(bias[l], h, weight[l]);
+      h = l + 1 < layers ? z.tanh_() : z;
+    }
+    torch::Tensor delta = (h - target).mul_(scale);
+    for (std::size_t l = layers; l-- > 0;) {
+      grads[2 * l] = torch::bmm(activation[l].transpose(1, 2), delta).view({members, -1});
+      grads[2 * l + 1] = delta.sum(1);
+      if (l > 0) {
+        const torch::Tensor& a = activation[l];
+        delta = torch::bmm(delta, weight_t[l]).mul_(1 - a * a);
+      }
+    }
+    torch::Tensor g = torch::cat(grads, 1);
+    const double progress = rb.epochs > 1 ? static_cast<double>(epoch) / (rb.epochs - 1) : 1.0;
+    const double lr = rb.final_learning_rate +
+                      0.5 * (rb.learning_rate - rb.final_learning_rate) * (1 + std::cos(M_PI * progress));
+    const double t = epoch + 1;
+    adam_m.mul_(kAdamBeta1).add_(g, 1 - kAdamBeta1);
+    adam_v.mul_(kAdamBeta2).addcmul_(g, g, 1 - kAdamBeta2);
+    torch::Tensor denom = (adam_v / (1 - std::pow(kAdamBeta2, t))).sqrt_().add_(kAdamEpsilon);
+    params.mul_(1 - lr * rb.weight_decay).addcdiv_(adam_m, denom, -lr / (1 - std::pow(kAdamBeta1, t)));
+  }
+  torch::set_num_threads(previous_threads);
+  const torch::Tensor result = params.contiguous();
+  return std::vector<float>(result.data_ptr<float>(), result.data_ptr<float>() + members * total);
+}
+
 }  // namespace
 
 }  // namespace demcal::smoothing::detail
@@ -102,6 +167,19 @@ extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_train(const demcal::smoothing::
                                                         std::string* error) {
   try {
     *output = demcal::smoothing::detail::train_batched(*batch, *options);
+    return 0;
+  } catch (const std::exception& e) {
+    *error = e.what();
+  } catch (...) {
+    *error = "unknown exception";
+  }
+  return 1;
+}
+
+extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_train_regression(const demcal::smoothing::RegressionBatch* batch,
+                                                                   std::vector<float>* parameters, std::string* error) {
+  try {
+    *parameters = demcal::smoothing::detail::train_regression(*batch);
     return 0;
   } catch (const std::exception& e) {
     *error = e.what();

@@ -2,6 +2,8 @@
 // training to it.
 #include "torch_plugin_abi.hpp"
 
+#include "demcal/smoothing/regression_ensemble.hpp"
+
 #include <dlfcn.h>
 #include <unistd.h>
 
@@ -19,6 +21,7 @@ constexpr const char* kPluginFile = "libdemcal_torch.so";
 struct LoadedPlugin {
   std::string path;
   detail::TorchTrainFunction train = nullptr;
+  detail::TorchRegressionFunction regression = nullptr;
   std::string error;  // set when no candidate loaded
 };
 
@@ -54,7 +57,8 @@ LoadedPlugin load_plugin() {
     }
     auto abi = reinterpret_cast<detail::TorchPluginAbiFunction>(dlsym(handle, "demcal_torch_plugin_abi"));
     auto train = reinterpret_cast<detail::TorchTrainFunction>(dlsym(handle, "demcal_torch_train"));
-    if (!abi || !train) {
+    auto regression = reinterpret_cast<detail::TorchRegressionFunction>(dlsym(handle, "demcal_torch_train_regression"));
+    if (!abi || !train || !regression) {
       tried += "\n  " + path + ": not a demcal LibTorch plugin (entry points missing)";
       dlclose(handle);
       continue;
@@ -67,10 +71,11 @@ LoadedPlugin load_plugin() {
     }
     plugin.path = path;
     plugin.train = train;  // the handle stays open for the life of the process
+    plugin.regression = regression;
     return plugin;
   }
   const char* env = std::getenv("DEMCAL_TORCH_PLUGIN");
-  plugin.error = std::string("the libtorch smoother backend needs the plugin ") + kPluginFile +
+  plugin.error = std::string("LibTorch training needs the plugin ") + kPluginFile +
                  ", and none could be loaded; searched" + (env && *env ? " (as $DEMCAL_TORCH_PLUGIN says)" : "") +
                  ":" + tried;
   return plugin;
@@ -85,6 +90,20 @@ const LoadedPlugin& plugin() {
 }  // namespace
 
 std::string libtorch_plugin_path() { return plugin().path; }
+
+std::vector<float> train_regression_ensemble(const RegressionBatch& b) {
+  const std::int64_t parameters = regression_parameter_count(b.inputs, b.outputs, b.hidden_layers, b.hidden_width);
+  auto size = [](std::int64_t a, std::int64_t c) { return static_cast<std::size_t>(a * c); };
+  if (b.members < 1 || b.rows < 1 || b.inputs < 1 || b.outputs < 1 || b.hidden_layers < 1 || b.hidden_width < 1 ||
+      b.epochs < 1 || b.threads < 1 || b.x.size() != size(b.rows, b.inputs) || b.y.size() != size(b.rows, b.outputs) ||
+      b.row_weight.size() != size(b.members, b.rows) || b.initial_parameters.size() != size(b.members, parameters))
+    throw std::invalid_argument("train_regression_ensemble: the batch's sizes disagree");
+  std::vector<float> trained;
+  std::string error;
+  if (plugin().regression(&b, &trained, &error) != 0)
+    throw std::runtime_error("LibTorch regression ensemble: " + error);
+  return trained;
+}
 
 namespace detail {
 

@@ -3,10 +3,21 @@
 // the LibTorch plugin links only this object of the module.
 #include "mlp_training.hpp"
 
+#include "demcal/smoothing/regression_ensemble.hpp"
+
 #include <algorithm>
 #include <cmath>
 
 namespace demcal::smoothing {
+
+std::int64_t regression_parameter_count(std::int64_t inputs, std::int64_t outputs, int hidden_layers, int hidden_width) {
+  std::int64_t count = 0, in = inputs;
+  for (int l = 0; l < hidden_layers; ++l) {
+    count += in * hidden_width + hidden_width;
+    in = hidden_width;
+  }
+  return count + in * outputs + outputs;
+}
 
 namespace detail {
 

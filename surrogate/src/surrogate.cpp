@@ -120,7 +120,7 @@ FailureClassifier FailureClassifier::from_json(const nlohmann::json& j, const st
     const auto& X = j.at("X");
     if (X.size() != failed.size()) throw std::invalid_argument("X and failed have different lengths");
     for (size_t i = 0; i < failed.size(); ++i)
-      rows.push_back({vector_from(X[i]), failed[i] > 0 ? std::numeric_limits<double>::quiet_NaN() : 0.0});
+      rows.push_back({vector_from(X[i]), failed[i] > 0 ? std::numeric_limits<double>::quiet_NaN() : 0.0, {}});
     c.fit(rows);
     c.bandwidth_ = j.at("bandwidth").get<double>();
     if (!(c.bandwidth_ > 0)) throw std::invalid_argument("bandwidth must be > 0");
@@ -141,7 +141,7 @@ Acquisition parse_acquisition(const std::string& text) {
 }
 
 void SurrogateOptions::Validate() const {
-  if (kind != "gp") throw std::invalid_argument("surrogate kind = '" + kind + "' (expected gp)");
+  if (kind != "gp" && kind != "mlp") throw std::invalid_argument("surrogate kind = '" + kind + "' (expected gp or mlp)");
   if (pool_factor < 1) throw std::invalid_argument("surrogate pool_factor = " + std::to_string(pool_factor) + " must be >= 1");
   if (k < 0) throw std::invalid_argument("surrogate k = " + std::to_string(k) + " must be >= 0 (0 = the whole batch)");
   if (!(lcb_kappa >= 0) || !std::isfinite(lcb_kappa))
@@ -150,12 +150,13 @@ void SurrogateOptions::Validate() const {
   if (max_training_runs < 10)
     throw std::invalid_argument("surrogate max_training_runs = " + std::to_string(max_training_runs) + " must be >= 10");
   gp.Validate();
+  mlp.Validate();
 }
 
 nlohmann::json SurrogateOptions::to_json() const {
   return {{"kind", kind},         {"pool_factor", pool_factor}, {"k", k},
           {"acquisition", to_string(acquisition)}, {"lcb_kappa", lcb_kappa}, {"min_runs", min_runs},
-          {"max_training_runs", max_training_runs}, {"gp", gp.to_json()}};
+          {"max_training_runs", max_training_runs}, {"gp", gp.to_json()}, {"mlp", mlp.to_json()}};
 }
 
 SurrogateOptions SurrogateOptions::from_json(const nlohmann::json& j, const std::string& where) {
@@ -171,6 +172,7 @@ SurrogateOptions SurrogateOptions::from_json(const nlohmann::json& j, const std:
       else if (key == "min_runs") o.min_runs = value.get<int>();
       else if (key == "max_training_runs") o.max_training_runs = value.get<int>();
       else if (key == "gp") o.gp = GpOptions::from_json(value, where + ".gp");
+      else if (key == "mlp") o.mlp = MlpOptions::from_json(value, where + ".mlp");
       else throw std::invalid_argument("unknown key");
     } catch (const std::exception& e) {
       throw std::invalid_argument(where + "." + key + " = " + value.dump() + ": " + e.what());
@@ -209,20 +211,70 @@ std::vector<TrainingRow> select_training_rows(const std::vector<TrainingRow>& ro
 
 // ---- model -----------------------------------------------------------------------------------
 
+namespace {
+
+// The rows an "mlp" model trains on: finite fitness and outputs, all of one length.
+void split_curve_rows(const std::vector<TrainingRow>& rows, Eigen::MatrixXd& X, Eigen::MatrixXd& Y, Eigen::VectorXd& y) {
+  std::vector<const TrainingRow*> usable;
+  for (const auto& r : rows)
+    if (std::isfinite(r.fitness) && r.outputs.size() > 0) {
+      if (!usable.empty() && r.outputs.size() != usable.front()->outputs.size())
+        throw std::invalid_argument("surrogate mlp: training rows have outputs of " + std::to_string(usable.front()->outputs.size()) +
+                                    " and " + std::to_string(r.outputs.size()) + " values");
+      usable.push_back(&r);
+    }
+  const Eigen::Index n = static_cast<Eigen::Index>(usable.size());
+  X.resize(n, n > 0 ? usable.front()->unit.size() : 0);
+  Y.resize(n, n > 0 ? usable.front()->outputs.size() : 0);
+  y.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    X.row(i) = usable[static_cast<size_t>(i)]->unit.transpose();
+    Y.row(i) = usable[static_cast<size_t>(i)]->outputs.transpose();
+    y[i] = usable[static_cast<size_t>(i)]->fitness;
+  }
+}
+
+}  // namespace
+
 bool SurrogateModel::fit(const std::vector<TrainingRow>& all_rows) {
   options_.Validate();
   const auto rows = select_training_rows(all_rows, options_.max_training_runs);
+  rows_ = static_cast<long>(rows.size());
+  if (options_.kind == "mlp") {
+    if (!hooks_.fitness) throw std::invalid_argument("surrogate mlp: no fitness function for predicted curves");
+    Eigen::MatrixXd X, Y;
+    Eigen::VectorXd y;
+    split_curve_rows(rows, X, Y, y);
+    ensemble_ = CurveEnsemble();
+    if (y.size() < 3) return false;
+    mlp_log_ = options_.gp.log_transform != LogTransform::never && (y.array() > 0).all();
+    if (options_.gp.log_transform == LogTransform::always && !mlp_log_)
+      throw std::invalid_argument("surrogate mlp: log_transform 'always' with a fitness <= 0");
+    ensemble_.fit(X, Y, options_.mlp);
+    classifier_.fit(rows);
+    const Eigen::ArrayXd targets = mlp_log_ ? Eigen::ArrayXd(y.array().log()) : Eigen::ArrayXd(y.array());
+    mlp_prior_sd_ = std::sqrt((targets - targets.mean()).square().mean());
+    if (!(mlp_prior_sd_ > 0)) mlp_prior_sd_ = 1.0;  // equal targets: no scale to cap at
+    double squares = 0;
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+      const double residual = predict(X.row(i).transpose()).mean - (mlp_log_ ? std::log(y[i]) : y[i]);
+      squares += residual * residual;
+    }
+    mlp_noise_sd_ = std::sqrt(squares / static_cast<double>(X.rows()));
+    set_incumbent(rows);
+    return true;
+  }
   Eigen::MatrixXd X;
   Eigen::VectorXd y;
   split_rows(rows, X, y);
   gp_ = GaussianProcess(options_.gp);
-  rows_ = static_cast<long>(rows.size());
   if (y.size() < 3 || gp_.fit(X, y) != GpStatus::fitted) return false;
   classifier_.fit(rows);
   return condition(all_rows);
 }
 
 bool SurrogateModel::condition(const std::vector<TrainingRow>& all_rows) {
+  if (options_.kind == "mlp") return fit(all_rows);
   if (gp_.length_scales().size() == 0) return false;
   const auto rows = select_training_rows(all_rows, options_.max_training_runs);
   Eigen::MatrixXd X;
@@ -235,26 +287,66 @@ bool SurrogateModel::condition(const std::vector<TrainingRow>& all_rows) {
   gp_.condition(X, y);
   classifier_.fit(rows);
   rows_ = static_cast<long>(rows.size());
-  // Incumbent of EI: the smallest posterior mean at a training point (robust to the noise).
-  incumbent_ = HUGE_VAL;
-  double lo = HUGE_VAL, hi = -HUGE_VAL;
-  for (Eigen::Index i = 0; i < X.rows(); ++i) {
-    incumbent_ = std::min(incumbent_, gp_.predict(X.row(i).transpose()).mean);
-    lo = std::min(lo, gp_.to_model(y[i]));
-    hi = std::max(hi, gp_.to_model(y[i]));
-  }
-  spread_ = hi > lo ? hi - lo : 1.0;
+  set_incumbent(rows);
   return gp_.fitted();
 }
 
+// Incumbent of EI: the smallest predicted mean at a training point (robust to the noise); spread:
+// the range of the model-space targets (LCB's failure penalty).
+void SurrogateModel::set_incumbent(const std::vector<TrainingRow>& rows) {
+  incumbent_ = HUGE_VAL;
+  double lo = HUGE_VAL, hi = -HUGE_VAL;
+  const bool log = log_transformed();
+  for (const auto& r : rows) {
+    if (!std::isfinite(r.fitness) || (options_.kind == "mlp" && r.outputs.size() == 0)) continue;
+    incumbent_ = std::min(incumbent_, predict(r.unit).mean);
+    const double v = log ? std::log(r.fitness) : r.fitness;
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  spread_ = hi > lo ? hi - lo : 1.0;
+}
+
+int SurrogateModel::dimension() const {
+  return options_.kind == "mlp" ? ensemble_.dimension() : static_cast<int>(gp_.length_scales().size());
+}
+
+bool SurrogateModel::log_transformed() const { return options_.kind == "mlp" ? mlp_log_ : gp_.log_transformed(); }
+
 Prediction SurrogateModel::predict(const Eigen::VectorXd& unit) const {
-  const GpPrediction g = gp_.predict(unit);
   Prediction p;
+  p.failure_probability = classifier_.probability(unit);
+  if (options_.kind == "mlp") {
+    if (!hooks_.fitness) throw std::logic_error("surrogate mlp: no fitness function for predicted curves");
+    const int members = ensemble_.members();
+    double sum = 0, squares = 0;
+    for (int m = 0; m < members; ++m) {
+      const double f = hooks_.fitness(ensemble_.predict(m, unit));
+      const double v = mlp_log_ ? std::log(std::max(f, 1e-300)) : f;
+      sum += v;
+      squares += v * v;
+    }
+    p.mean = sum / members;
+    // Where no run succeeded the members can disagree without bound; like a GP's posterior under
+    // its prior, the spread is capped at the spread of the training targets.
+    p.sd = std::min(std::sqrt(std::max(0.0, (squares - members * p.mean * p.mean) / (members - 1))), mlp_prior_sd_);
+    p.fitness = mlp_log_ ? std::exp(p.mean) : p.mean;
+    p.noise_sd = mlp_noise_sd_;
+    return p;
+  }
+  const GpPrediction g = gp_.predict(unit);
   p.mean = g.mean;
   p.sd = g.sd;
+  p.noise_sd = g.noise_sd;
   p.fitness = gp_.from_model(g.mean);
-  p.failure_probability = classifier_.probability(unit);
   return p;
+}
+
+std::pair<double, double> SurrogateModel::interval(const Eigen::VectorXd& unit, double level) const {
+  if (options_.kind != "mlp") return gp_.interval(unit, level);
+  const Prediction p = predict(unit);
+  const double half = normal_quantile(0.5 + level / 2) * std::sqrt(p.sd * p.sd + p.noise_sd * p.noise_sd);
+  return mlp_log_ ? std::pair{std::exp(p.mean - half), std::exp(p.mean + half)} : std::pair{p.mean - half, p.mean + half};
 }
 
 double SurrogateModel::score(const Prediction& p) const {
@@ -270,20 +362,42 @@ double SurrogateModel::score(const Prediction& p) const {
 }
 
 nlohmann::json SurrogateModel::to_json() const {
-  return {{"format", "demcal-surrogate"}, {"version", 1},          {"kind", options_.kind},
-          {"options", options_.to_json()}, {"gp", gp_.to_json()}, {"classifier", classifier_.to_json()}};
+  nlohmann::json j = {{"format", "demcal-surrogate"}, {"version", 1}, {"kind", options_.kind},
+                      {"options", options_.to_json()}, {"classifier", classifier_.to_json()}};
+  if (options_.kind == "mlp") {
+    j["ensemble"] = ensemble_.to_json();
+    j["log_transform"] = mlp_log_;
+    j["noise_sd"] = mlp_noise_sd_;
+    j["prior_sd"] = mlp_prior_sd_;
+    j["incumbent"] = incumbent_;
+    j["spread"] = spread_;
+    j["training_rows"] = rows_;
+  } else {
+    j["gp"] = gp_.to_json();
+  }
+  return j;
 }
 
 SurrogateModel SurrogateModel::from_json(const nlohmann::json& j, const std::string& where) {
   try {
     if (j.at("format") != "demcal-surrogate") throw std::invalid_argument("not a demcal surrogate model file");
     SurrogateModel m(SurrogateOptions::from_json(j.at("options"), where + ": options"));
-    m.gp_ = GaussianProcess::from_json(j.at("gp"), where + ": gp");
-    std::vector<TrainingRow> rows;
-    const auto& X = j.at("gp").at("X");
-    const auto y = j.at("gp").at("y").get<std::vector<double>>();
-    for (size_t i = 0; i < y.size(); ++i) rows.push_back({vector_from(X[i]), y[i]});
-    m.condition(rows);
+    if (m.options_.kind == "mlp") {
+      m.ensemble_ = CurveEnsemble::from_json(j.at("ensemble"), where + ": ensemble");
+      m.mlp_log_ = j.at("log_transform").get<bool>();
+      m.mlp_noise_sd_ = j.at("noise_sd").get<double>();
+      m.mlp_prior_sd_ = j.at("prior_sd").get<double>();
+      m.incumbent_ = j.at("incumbent").get<double>();
+      m.spread_ = j.at("spread").get<double>();
+      m.rows_ = j.at("training_rows").get<long>();
+    } else {
+      m.gp_ = GaussianProcess::from_json(j.at("gp"), where + ": gp");
+      std::vector<TrainingRow> rows;
+      const auto& X = j.at("gp").at("X");
+      const auto y = j.at("gp").at("y").get<std::vector<double>>();
+      for (size_t i = 0; i < y.size(); ++i) rows.push_back({vector_from(X[i]), y[i], {}});
+      m.condition(rows);
+    }
     m.classifier_ = FailureClassifier::from_json(j.at("classifier"), where + ": classifier");
     return m;
   } catch (const nlohmann::json::exception& e) {
@@ -367,7 +481,8 @@ nlohmann::json CrossValidation::to_json() const {
           {"failure_brier", failure_brier}};
 }
 
-CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const SurrogateOptions& options, int folds) {
+CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const SurrogateOptions& options, int folds,
+                               const CurveHooks& hooks) {
   if (folds < 2) throw std::invalid_argument("cross_validate: folds = " + std::to_string(folds) + " must be >= 2");
   CrossValidation cv;
   cv.rows = static_cast<long>(rows.size());
@@ -378,9 +493,10 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
   for (int f = 0; f < folds; ++f) {
     std::vector<TrainingRow> train, test;
     for (size_t i = 0; i < rows.size(); ++i) (static_cast<int>(i % static_cast<size_t>(folds)) == f ? test : train).push_back(rows[i]);
-    SurrogateModel model(options);
+    SurrogateModel model(options, hooks);
     if (test.empty() || !model.fit(train)) continue;
     for (const auto& r : test) {
+      if (options.kind == "mlp" && std::isfinite(r.fitness) && r.outputs.size() == 0) continue;
       const Prediction p = model.predict(r.unit);
       const bool failed = !std::isfinite(r.fitness);
       brier += (p.failure_probability - (failed ? 1.0 : 0.0)) * (p.failure_probability - (failed ? 1.0 : 0.0));
@@ -392,7 +508,7 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
       abs_errors.push_back(std::abs(p.fitness - r.fitness));
       if (r.fitness != 0) rel_errors.push_back(std::abs(p.fitness - r.fitness) / std::abs(r.fitness));
       ys.push_back(r.fitness);
-      const auto [lo, hi] = model.gp().interval(r.unit, 0.9);
+      const auto [lo, hi] = model.interval(r.unit, 0.9);
       if (r.fitness >= lo && r.fitness <= hi) ++covered;
     }
   }
@@ -424,8 +540,8 @@ double negative_score(unsigned n, const double* x, double*, void* data) {
 class BayesOptimiser final : public optimise::Optimiser {
  public:
   BayesOptimiser(const optimise::ParameterSpace& space, const optimise::OptimiserOptions& options,
-                 SurrogateOptions surrogate, std::vector<TrainingRow> warm)
-      : Optimiser(space, options, "bo"), surrogate_(std::move(surrogate)), warm_(std::move(warm)) {
+                 SurrogateOptions surrogate, std::vector<TrainingRow> warm, CurveHooks hooks)
+      : Optimiser(space, options, "bo"), surrogate_(std::move(surrogate)), warm_(std::move(warm)), hooks_(std::move(hooks)) {
     surrogate_.Validate();
     const int d = space.dimension();
     for (const auto& r : warm_)
@@ -521,9 +637,11 @@ class BayesOptimiser final : public optimise::Optimiser {
   Eigen::VectorXd propose() {
     const int d = space_.dimension();
     std::vector<TrainingRow> rows = warm_;
-    for (size_t i = 0; i < told_x_.size(); ++i) rows.push_back({told_x_[i], told_f_[i]});
+    for (size_t i = 0; i < told_x_.size(); ++i)
+      rows.push_back({told_x_[i], told_f_[i],
+                      surrogate_.kind == "mlp" && hooks_.outputs_at ? hooks_.outputs_at(told_x_[i]) : Eigen::VectorXd()});
     std::mt19937_64 rng(mix(mix(options_.seed) ^ static_cast<std::uint64_t>(iteration_ + 1)));
-    model_ = SurrogateModel(surrogate_);
+    model_ = SurrogateModel(surrogate_, hooks_);
     Eigen::VectorXd random_point(d);
     for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
     if (!model_.fit(rows)) return random_point;
@@ -579,6 +697,7 @@ class BayesOptimiser final : public optimise::Optimiser {
 
   SurrogateOptions surrogate_;
   std::vector<TrainingRow> warm_;
+  CurveHooks hooks_;
   Eigen::MatrixXd design_;
   std::vector<Eigen::VectorXd> told_x_;
   std::vector<double> told_f_;
@@ -592,11 +711,13 @@ class BayesOptimiser final : public optimise::Optimiser {
 std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
                                                           const optimise::OptimiserOptions& options,
                                                           const SurrogateOptions& surrogate,
-                                                          std::vector<TrainingRow> warm_rows) {
+                                                          std::vector<TrainingRow> warm_rows, CurveHooks hooks) {
   space.Validate();
   if (options.population < 1) throw std::invalid_argument("bo: population must be >= 1");
   if (options.evaluation_budget() < 1) throw std::invalid_argument("bo: the evaluation budget must be >= 1");
-  return std::make_unique<BayesOptimiser>(space, options, surrogate, std::move(warm_rows));
+  if (surrogate.kind == "mlp" && (!hooks.fitness || !hooks.outputs_at))
+    throw std::invalid_argument("bo: the mlp surrogate needs the campaign's curves (fitness and outputs hooks)");
+  return std::make_unique<BayesOptimiser>(space, options, surrogate, std::move(warm_rows), std::move(hooks));
 }
 
 }  // namespace demcal::surrogate

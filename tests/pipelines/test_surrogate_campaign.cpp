@@ -38,14 +38,14 @@ std::string make_measurement(const fs::path& dir) {
 }
 
 // The toy wall: failures (a crashed program) above 42 degrees, a surrogate that screens 8 -> 4.
-json toy_campaign(const fs::path& dir, std::uint64_t seed = 3) {
+json toy_campaign(const fs::path& dir, std::uint64_t seed = 3, const std::string& kind = "gp") {
   return {{"name", "toy-surrogate"},
           {"measured", make_measurement(dir)},
           {"parameters", {{{"name", "k"}, {"lower", 1e6}, {"upper", 1e8}, {"scale", "log"}},
                           {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
           {"objective", 1},
           {"optimiser", {{"algorithm", "tbpso"}, {"population", 8}, {"max_evaluations", 36}, {"seed", seed}}},
-          {"surrogate", {{"k", 4}, {"pool_factor", 4}, {"min_runs", 8}}},
+          {"surrogate", {{"k", 4}, {"pool_factor", 4}, {"min_runs", 8}, {"kind", kind}}},
           {"backend", {{"type", "command"},
                        {"command", python() + " " + test_support::kToySimulator +
                                        " {k} {friction_deg} {output} --crash-above 42"},
@@ -158,14 +158,54 @@ TEST(SurrogateData, RowsDoNotDependOnTheOrderRunsFinished) {
 
 // The archive and the optimiser hold simulated values only; the budget counts simulations; a second
 // campaign on the same archive starts warm (its first iteration is already screened).
-TEST(SurrogateCampaign, ArchiveAndOptimiserNeverHoldAPrediction) {
-  const auto dir = fresh_dir("never-predicted");
-  std::ofstream(dir / "campaign.json") << toy_campaign(dir).dump(2);
+// The "mlp" kind's outputs: a run's curves resampled on the measurement's grid score (through
+// curve_fitness) as the objective scores the run itself, a shorter run included.
+TEST(SurrogateData, CurveOutputsScoreAsTheObjectiveScoresTheRun) {
+  auto toy_curve = [](double capacity, double stiffness, double end, double noise) {
+    smoothing::Curve c;
+    c.source = "toy";
+    c.columns = {{"top_horizontal", "m", {}}, {"force", "N", {}}};
+    std::mt19937_64 rng(11);
+    for (int i = 0; i <= 400; ++i) {
+      const double d = end * i / 400.0;
+      c.columns[0].values.push_back(d);
+      c.columns[1].values.push_back(capacity * (1 - std::exp(-stiffness * d / capacity)) +
+                                    noise * (static_cast<double>(rng() % 2001) / 1000.0 - 1.0));
+    }
+    return c;
+  };
+  const auto measured = toy_curve(7000, 2e7, 0.010, 50);
+  smoothing::ObjectiveOptions objective;
+  auto grid = std::make_shared<const CurveGrid>(make_curve_grid(measured, objective, nullptr, 2.0, 40));
+  ASSERT_EQ(grid->channels.size(), 1u);
+  EXPECT_EQ(grid->size(), 41);
+  // The grid's own error, against the scale of the fitness (that of a curve of zero force): 0.1 %.
+  smoothing::Curve zero = toy_curve(1e-9, 1, 0.010, 0);
+  const double scale = 2.0 * smoothing::objective1(measured, zero, objective).fitness;
+  for (const auto& run : {toy_curve(6000, 1e7, 0.010, 0), toy_curve(8000, 4e7, 0.006, 0), toy_curve(7000, 2e7, 0.012, 0)}) {
+    const Eigen::VectorXd outputs = curve_outputs(run, *grid);
+    ASSERT_EQ(outputs.size(), 41);
+    EXPECT_DOUBLE_EQ(outputs[40], run.columns[0].values.back()) << "the last output is the run's end displacement";
+    const double expected = 2.0 * smoothing::objective1(measured, run, objective).fitness;
+    EXPECT_NEAR(curve_fitness(outputs, {grid}), expected, 0.02 * expected + 0.001 * scale);
+  }
+  smoothing::Curve other = toy_curve(6000, 1e7, 0.010, 0);
+  other.columns[0].name = "other_gauge";
+  EXPECT_EQ(curve_outputs(other, *grid).size(), 0) << "a run without the measured channel has no outputs";
+}
+
+// Both kinds: the Gaussian process on the fitness, the MLP ensemble on the curves.
+class SurrogateKinds : public ::testing::TestWithParam<std::string> {};
+INSTANTIATE_TEST_SUITE_P(SurrogateCampaign, SurrogateKinds, ::testing::Values("gp", "mlp"));
+
+TEST_P(SurrogateKinds, ArchiveAndOptimiserNeverHoldAPrediction) {
+  const auto dir = fresh_dir("never-predicted-" + GetParam());
+  std::ofstream(dir / "campaign.json") << toy_campaign(dir, 3, GetParam()).dump(2);
   const auto r = calibrate(dir / "campaign.json", dir / "out", false);
   ASSERT_TRUE(r.ok()) << r.message;
   const json result = read_json(dir / "out" / "result.json");
   ASSERT_TRUE(result.contains("surrogate"));
-  EXPECT_EQ(result["surrogate"]["kind"], "gp");
+  EXPECT_EQ(result["surrogate"]["kind"], GetParam());
   EXPECT_EQ(result["simulations"], 36) << "--max-simulations counts simulations";
   EXPECT_GT(result["surrogate"]["screened_out"].get<long>(), 0);
   // Screening starts once 8 runs have a finite fitness; the unscreened batches before are whole.
@@ -210,7 +250,7 @@ TEST(SurrogateCampaign, ArchiveAndOptimiserNeverHoldAPrediction) {
   }
 
   // A second campaign (another seed) on the same archive: warm from the first one's 36 runs.
-  json second = toy_campaign(dir, 4);
+  json second = toy_campaign(dir, 4, GetParam());
   std::ofstream(dir / "second.json") << second.dump(2);
   const auto r2 = calibrate(dir / "second.json", dir / "second", false, nullptr, (dir / "out" / "archive.sqlite").string());
   ASSERT_TRUE(r2.ok()) << r2.message;
@@ -219,9 +259,9 @@ TEST(SurrogateCampaign, ArchiveAndOptimiserNeverHoldAPrediction) {
 }
 
 // kill -9 during a screened campaign, then --resume: the result is the uninterrupted one.
-TEST(SurrogateCampaign, KilledAndResumedEndsWithTheUninterruptedResult) {
-  const auto dir = fresh_dir("resume");
-  std::ofstream(dir / "campaign.json") << toy_campaign(dir, 5).dump(2);
+TEST_P(SurrogateKinds, KilledAndResumedEndsWithTheUninterruptedResult) {
+  const auto dir = fresh_dir("resume-" + GetParam());
+  std::ofstream(dir / "campaign.json") << toy_campaign(dir, 5, GetParam()).dump(2);
   const std::string log = (dir / "simulator.log").string();
   ::setenv("TOY_SIMULATOR_LOG", log.c_str(), 1);
   auto logged_runs = [&] {
@@ -313,4 +353,27 @@ TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
   EXPECT_EQ(result["surrogate"]["simulated"], 12);
   // 8 proposed -> 4 simulated, twice; the last batch is cut to the 4 simulations left.
   EXPECT_EQ(result["surrogate"]["screened_out"], 8);
+
+  // The mlp kind scores predicted curves against a measurement: it needs the campaign that names it.
+  const std::string campaign_file = (dir / "campaign.json").string();
+  EXPECT_FALSE(demcal({"surrogate", "check", "--archive", archive, "--kind", "mlp"}, "mlp-alone.json").ok());
+  ASSERT_TRUE(demcal({"surrogate", "check", "--archive", archive, "--kind", "mlp", "--campaign", campaign_file},
+                     "mlp-check.json").ok());
+  const json mlp = read_json(dir / "mlp-check.json");
+  EXPECT_EQ(mlp["kind"], "mlp");
+  EXPECT_EQ(mlp["cross_validation"]["finite_rows"], cv["finite_rows"]) << "every scored run has its curves";
+  EXPECT_LT(mlp["cross_validation"]["relative_error"].get<double>(), 0.5);
+  ASSERT_TRUE(demcal({"surrogate", "train", "--archive", archive, "--kind", "mlp", "--campaign", campaign_file, "--out",
+                      (dir / "mlp-model.json").string()}, "mlp-train.json").ok());
+  EXPECT_EQ(read_json(dir / "mlp-model.json")["kind"], "mlp");
+  // A campaign given the mlp model takes its kind and screens from the first batch.
+  json with_mlp = toy_campaign(dir, 9);
+  with_mlp["surrogate"].erase("kind");
+  with_mlp["surrogate"]["model"] = (dir / "mlp-model.json").string();
+  with_mlp["optimiser"]["max_evaluations"] = 12;
+  std::ofstream(dir / "with-mlp.json") << with_mlp.dump(2);
+  ASSERT_TRUE(calibrate(dir / "with-mlp.json", dir / "with-mlp", false).ok());
+  const json mlp_result = read_json(dir / "with-mlp" / "result.json");
+  EXPECT_EQ(mlp_result["surrogate"]["kind"], "mlp");
+  EXPECT_EQ(mlp_result["surrogate"]["screened_out"], 8);
 }

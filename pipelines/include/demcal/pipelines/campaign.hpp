@@ -43,11 +43,14 @@
 
 #include <limits>
 #include <map>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 namespace demcal::pipelines {
+
+struct CurveGrid;
 
 // Bad campaign input; the message names the file and key (e.g. "c.json: parameters[1].lower: ...").
 class CampaignError : public std::runtime_error {
@@ -156,6 +159,15 @@ struct CampaignConfig {
 CampaignConfig campaign_from_json(const nlohmann::json& json, const std::string& base_dir,
                                   const std::string& source);
 CampaignConfig load_campaign(const std::string& path);
+
+// The "mlp" surrogate's curve grid of each case (surrogate_data.hpp), beside the case's objective
+// key (which measurement, objective and smoother its archived fitness rows belong to). Loads and,
+// for objective 2, smooths the measurements. Throws CampaignError naming the file at fault.
+struct CaseCurveGrid {
+  std::string objective_key;
+  std::shared_ptr<const CurveGrid> grid;
+};
+std::vector<CaseCurveGrid> campaign_curve_grids(const CampaignConfig& config);
 
 // "kn=1e8:1e10:log" | "friction_deg=25:45" | "ks=fixed:1e9" | "ks=tied:kn:2.5" -> added to space.
 // Throws CampaignError naming the flag text.

@@ -6,9 +6,15 @@
 // (archive_training_rows) and runs the simulations.
 //
 // Pieces
-// - SurrogateModel: a GaussianProcess on the finite fitness values plus a FailureClassifier trained
-//   on all rows (failed = non-finite fitness: unstable runs, no common window with the measurement,
-//   a crashed external program). Both are deterministic functions of the rows and the options.
+// - SurrogateModel, of one of two kinds, plus a FailureClassifier trained on all rows (failed =
+//   non-finite fitness: unstable runs, no common window with the measurement, a crashed external
+//   program). Both are deterministic functions of the rows and the options.
+//   - "gp" (default): a GaussianProcess on the finite fitness values.
+//   - "mlp": a CurveEnsemble (curve_ensemble.hpp) on the rows' outputs, a run's resampled curves;
+//     the owner's CurveHooks::fitness turns each member's predicted curves into a fitness, and the
+//     prediction is the members' mean and spread (model space: log fitness when all are > 0, unless
+//     gp.log_transform says "never"), the spread capped at that of the training targets, as a GP's
+//     prior caps its posterior. One model serves any objective of the same scene.
 // - Acquisition: expected improvement (EI, default) or a lower confidence bound (LCB), both in the
 //   GP's model space (log fitness when the log transform was chosen), multiplied (EI) or penalised
 //   (LCB) by the predicted probability of failure.
@@ -25,12 +31,14 @@
 #pragma once
 
 #include "demcal/optimise/optimiser.hpp"
+#include "demcal/surrogate/curve_ensemble.hpp"
 #include "demcal/surrogate/gaussian_process.hpp"
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -39,10 +47,22 @@
 namespace demcal::surrogate {
 
 // One training row: a point of the unit cube of the campaign's parameter space and its fitness
-// (NaN or inf = a failed run).
+// (NaN or inf = a failed run); for the "mlp" kind also the run's outputs (its resampled curves, a
+// vector whose layout the owner defines; empty when unknown: such a row trains the classifier only).
 struct TrainingRow {
   Eigen::VectorXd unit;
   double fitness = std::numeric_limits<double>::quiet_NaN();
+  Eigen::VectorXd outputs = Eigen::VectorXd();
+};
+
+// What the "mlp" kind needs from its owner (pipelines/ sets both from the campaign's cases).
+struct CurveHooks {
+  // The fitness of predicted outputs: the campaign's objective applied to the curves they describe.
+  // Must be finite. Required by the "mlp" kind.
+  std::function<double(const Eigen::VectorXd& outputs)> fitness;
+  // The outputs of a simulated point (its archived runs), for "bo", which is told fitness values
+  // only; empty when unknown.
+  std::function<Eigen::VectorXd(const Eigen::VectorXd& unit)> outputs_at;
 };
 
 // Probability that a run at a point fails: a Nadaraya-Watson kernel estimate with a Gaussian kernel
@@ -75,7 +95,7 @@ Acquisition parse_acquisition(const std::string& text);  // "ei" | "lcb"
 
 // Campaign key "surrogate" (docs/surrogate.md).
 struct SurrogateOptions {
-  std::string kind = "gp";           // the model kind ("gp")
+  std::string kind = "gp";           // the model kind: "gp" or "mlp"
   int pool_factor = 5;               // pool = pool_factor x batch (the candidate and pool_factor - 1
                                      // alternatives per slot), >= 1
   int k = 0;                         // candidates simulated per iteration; 0 = the whole batch
@@ -84,7 +104,8 @@ struct SurrogateOptions {
   int min_runs = 10;                 // finished runs needed before the screen switches on (and the
                                      // initial design of "bo"), >= 3
   int max_training_runs = 400;       // at most this many rows (select_training_rows), >= 10
-  GpOptions gp;
+  GpOptions gp;                      // "gp"; its log_transform also rules the "mlp" kind's
+  MlpOptions mlp;                    // "mlp"
   // Throws std::invalid_argument naming the option and value.
   void Validate() const;
   nlohmann::json to_json() const;
@@ -101,26 +122,37 @@ struct Prediction {
   double sd = 0;            // latent sd, model space
   double fitness = 0;       // back-transformed mean (the median predicted fitness)
   double failure_probability = 0;
+  double noise_sd = 0;      // sd of a new observation around the latent value, model space
 };
 
 class SurrogateModel {
  public:
   SurrogateModel() = default;
-  explicit SurrogateModel(SurrogateOptions options) : options_(std::move(options)) {}
+  explicit SurrogateModel(SurrogateOptions options, CurveHooks hooks = {})
+      : options_(std::move(options)), hooks_(std::move(hooks)) {}
+  // A model read from a file has no hooks: an "mlp" model needs them before it predicts.
+  void set_hooks(CurveHooks hooks) { hooks_ = std::move(hooks); }
 
-  // Trains the GP (finite rows) and the classifier (all rows). Returns false (and stays unusable)
-  // with fewer than 3 finite rows.
+  // Trains the model (finite rows; "mlp": finite rows with outputs) and the classifier (all rows).
+  // Returns false (and stays unusable) with fewer than 3 such rows. Throws std::invalid_argument for
+  // an "mlp" model without CurveHooks::fitness or with rows whose outputs differ in length.
   bool fit(const std::vector<TrainingRow>& rows);
-  // Keeps the hyperparameters of a trained model and conditions on these rows instead.
+  // "gp": keeps the hyperparameters of a trained model and conditions on these rows instead.
+  // "mlp" (no hyperparameters): trains anew on these rows.
   bool condition(const std::vector<TrainingRow>& rows);
-  bool usable() const { return gp_.fitted(); }
+  bool usable() const { return options_.kind == "mlp" ? ensemble_.fitted() : gp_.fitted(); }
+  int dimension() const;
+  bool log_transformed() const;
 
   Prediction predict(const Eigen::VectorXd& unit) const;
+  // Central interval of a new observation at `level` (e.g. 0.9), in fitness units.
+  std::pair<double, double> interval(const Eigen::VectorXd& unit, double level) const;
   // The acquisition's score (larger = more worth simulating).
   double score(const Prediction& p) const;
   double score(const Eigen::VectorXd& unit) const { return score(predict(unit)); }
 
   const GaussianProcess& gp() const { return gp_; }
+  const CurveEnsemble& ensemble() const { return ensemble_; }
   const FailureClassifier& classifier() const { return classifier_; }
   const SurrogateOptions& options() const { return options_; }
   long training_rows() const { return rows_; }
@@ -129,8 +161,14 @@ class SurrogateModel {
   static SurrogateModel from_json(const nlohmann::json& json, const std::string& where);
 
  private:
+  void set_incumbent(const std::vector<TrainingRow>& rows);
   SurrogateOptions options_;
+  CurveHooks hooks_;
   GaussianProcess gp_;
+  CurveEnsemble ensemble_;
+  bool mlp_log_ = false;            // "mlp": model space is log fitness
+  double mlp_noise_sd_ = 0;         // "mlp": RMS of the training residuals of the mean, model space
+  double mlp_prior_sd_ = 1;         // "mlp": sd of the training targets, model space (caps the spread)
   FailureClassifier classifier_;
   double incumbent_ = 0;            // best finite model-space target (EI)
   double spread_ = 1;               // range of model-space targets (LCB failure penalty)
@@ -169,7 +207,8 @@ struct CrossValidation {
   double failure_brier = 0;         // mean (p − failed)² over all held-out rows
   nlohmann::json to_json() const;
 };
-CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const SurrogateOptions& options, int folds = 5);
+CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const SurrogateOptions& options, int folds = 5,
+                               const CurveHooks& hooks = {});
 
 // "bo": Bayesian optimisation behind the ask/tell interface (see the header comment). The initial
 // design has max(options.min_runs, population) points minus the warm rows inside the space
@@ -180,6 +219,7 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
 std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
                                                           const optimise::OptimiserOptions& options,
                                                           const SurrogateOptions& surrogate,
-                                                          std::vector<TrainingRow> warm_rows = {});
+                                                          std::vector<TrainingRow> warm_rows = {},
+                                                          CurveHooks hooks = {});
 
 }  // namespace demcal::surrogate

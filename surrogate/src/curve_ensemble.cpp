@@ -1,0 +1,231 @@
+#include "demcal/surrogate/curve_ensemble.hpp"
+
+#include "demcal/smoothing/regression_ensemble.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace demcal::surrogate {
+
+namespace {
+
+std::uint64_t splitmix(std::uint64_t& state) {
+  std::uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+double uniform01(std::uint64_t& state) { return static_cast<double>(splitmix(state) >> 11) * 0x1.0p-53; }
+
+std::string fmt(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.17g", v);
+  return text;
+}
+
+nlohmann::json matrix_json(const Eigen::MatrixXd& m) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    std::vector<double> row(static_cast<size_t>(m.cols()));
+    for (Eigen::Index j = 0; j < m.cols(); ++j) row[static_cast<size_t>(j)] = m(i, j);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+Eigen::MatrixXd matrix_from(const nlohmann::json& j) {
+  const auto rows = j.get<std::vector<std::vector<double>>>();
+  Eigen::MatrixXd m(static_cast<Eigen::Index>(rows.size()), rows.empty() ? 0 : static_cast<Eigen::Index>(rows[0].size()));
+  for (size_t i = 0; i < rows.size(); ++i) {
+    if (static_cast<Eigen::Index>(rows[i].size()) != m.cols()) throw std::invalid_argument("ragged matrix");
+    for (size_t k = 0; k < rows[i].size(); ++k) m(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = rows[i][k];
+  }
+  return m;
+}
+
+Eigen::VectorXd vector_from(const nlohmann::json& j) {
+  const auto v = j.get<std::vector<double>>();
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+}
+
+}  // namespace
+
+void MlpOptions::Validate() const {
+  auto fail = [](const std::string& what) { throw std::invalid_argument("surrogate mlp." + what); };
+  if (members < 2) fail("members = " + std::to_string(members) + " must be >= 2 (their spread is the uncertainty)");
+  if (hidden_layers < 1) fail("hidden_layers = " + std::to_string(hidden_layers) + " must be >= 1");
+  if (hidden_width < 1) fail("hidden_width = " + std::to_string(hidden_width) + " must be >= 1");
+  if (epochs < 1) fail("epochs = " + std::to_string(epochs) + " must be >= 1");
+  if (!(learning_rate > 0) || !std::isfinite(learning_rate)) fail("learning_rate = " + fmt(learning_rate) + " must be > 0");
+  if (!(final_learning_rate > 0) || final_learning_rate > learning_rate)
+    fail("final_learning_rate = " + fmt(final_learning_rate) + " must be in (0, learning_rate]");
+  if (!(weight_decay >= 0) || !std::isfinite(weight_decay)) fail("weight_decay = " + fmt(weight_decay) + " must be >= 0");
+}
+
+nlohmann::json MlpOptions::to_json() const {
+  return {{"members", members},
+          {"hidden_layers", hidden_layers},
+          {"hidden_width", hidden_width},
+          {"epochs", epochs},
+          {"learning_rate", learning_rate},
+          {"final_learning_rate", final_learning_rate},
+          {"weight_decay", weight_decay},
+          {"bootstrap", bootstrap},
+          {"seed", seed}};
+}
+
+MlpOptions MlpOptions::from_json(const nlohmann::json& j, const std::string& where) {
+  if (!j.is_object()) throw std::invalid_argument(where + ": must be an object");
+  MlpOptions o;
+  for (const auto& [key, value] : j.items()) {
+    try {
+      if (key == "members") o.members = value.get<int>();
+      else if (key == "hidden_layers") o.hidden_layers = value.get<int>();
+      else if (key == "hidden_width") o.hidden_width = value.get<int>();
+      else if (key == "epochs") o.epochs = value.get<int>();
+      else if (key == "learning_rate") o.learning_rate = value.get<double>();
+      else if (key == "final_learning_rate") o.final_learning_rate = value.get<double>();
+      else if (key == "weight_decay") o.weight_decay = value.get<double>();
+      else if (key == "bootstrap") o.bootstrap = value.get<bool>();
+      else if (key == "seed") o.seed = value.get<std::uint64_t>();
+      else throw std::invalid_argument("unknown key");
+    } catch (const std::exception& e) {
+      throw std::invalid_argument(where + "." + key + " = " + value.dump() + ": " + e.what());
+    }
+  }
+  try {
+    o.Validate();
+  } catch (const std::exception& e) {
+    throw std::invalid_argument(where + ": " + e.what());
+  }
+  return o;
+}
+
+bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options) {
+  options.Validate();
+  members_.clear();
+  if (X.rows() != Y.rows()) throw std::invalid_argument("CurveEnsemble: X and Y have different row counts");
+  if (X.rows() < 3 || Y.cols() < 1) return false;
+  if (!X.allFinite() || !Y.allFinite()) throw std::invalid_argument("CurveEnsemble: non-finite training data");
+  const Eigen::Index n = X.rows(), d = X.cols(), m = Y.cols();
+  dimension_ = static_cast<int>(d);
+  mean_ = Y.colwise().mean().transpose();
+  scale_.resize(m);
+  for (Eigen::Index k = 0; k < m; ++k) {
+    const double sd = std::sqrt((Y.col(k).array() - mean_[k]).square().sum() / static_cast<double>(n));
+    scale_[k] = sd > 1e-12 * (1 + std::abs(mean_[k])) ? sd : 1.0;  // a constant column stays as it is
+  }
+
+  smoothing::RegressionBatch batch;
+  batch.members = options.members;
+  batch.rows = n;
+  batch.inputs = d;
+  batch.outputs = m;
+  batch.hidden_layers = options.hidden_layers;
+  batch.hidden_width = options.hidden_width;
+  batch.epochs = options.epochs;
+  batch.learning_rate = options.learning_rate;
+  batch.final_learning_rate = options.final_learning_rate;
+  batch.weight_decay = options.weight_decay;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    for (Eigen::Index k = 0; k < d; ++k) batch.x.push_back(static_cast<float>(2 * X(i, k) - 1));
+    for (Eigen::Index k = 0; k < m; ++k) batch.y.push_back(static_cast<float>((Y(i, k) - mean_[k]) / scale_[k]));
+  }
+  const std::int64_t count = smoothing::regression_parameter_count(d, m, options.hidden_layers, options.hidden_width);
+  for (int member = 0; member < options.members; ++member) {
+    std::uint64_t state = options.seed * 0x2545f4914f6cdd1dULL + static_cast<std::uint64_t>(member);
+    std::vector<float> counts(static_cast<size_t>(n), options.bootstrap ? 0.0f : 1.0f);
+    if (options.bootstrap)
+      for (Eigen::Index i = 0; i < n; ++i) counts[splitmix(state) % static_cast<std::uint64_t>(n)] += 1.0f;
+    batch.row_weight.insert(batch.row_weight.end(), counts.begin(), counts.end());
+    // Glorot-uniform weights, zero biases, in the flat layout W0, b0, W1, b1, ...
+    std::int64_t in = d;
+    for (int l = 0; l <= options.hidden_layers; ++l) {
+      const std::int64_t out = l < options.hidden_layers ? options.hidden_width : m;
+      const double limit = std::sqrt(6.0 / static_cast<double>(in + out));
+      for (std::int64_t w = 0; w < in * out; ++w) batch.initial_parameters.push_back(static_cast<float>(limit * (2 * uniform01(state) - 1)));
+      batch.initial_parameters.insert(batch.initial_parameters.end(), static_cast<size_t>(out), 0.0f);
+      in = out;
+    }
+  }
+  const std::vector<float> trained = smoothing::train_regression_ensemble(batch);
+
+  for (int member = 0; member < options.members; ++member) {
+    const float* p = trained.data() + static_cast<std::int64_t>(member) * count;
+    Network net;
+    std::int64_t in = d;
+    for (int l = 0; l <= options.hidden_layers; ++l) {
+      const std::int64_t out = l < options.hidden_layers ? options.hidden_width : m;
+      Eigen::MatrixXd w(out, in);
+      for (std::int64_t a = 0; a < in; ++a)
+        for (std::int64_t b = 0; b < out; ++b) w(b, a) = p[a * out + b];
+      p += in * out;
+      Eigen::VectorXd bias(out);
+      for (std::int64_t b = 0; b < out; ++b) bias[b] = p[b];
+      p += out;
+      net.weight.push_back(std::move(w));
+      net.bias.push_back(std::move(bias));
+      in = out;
+    }
+    members_.push_back(std::move(net));
+  }
+  return true;
+}
+
+Eigen::VectorXd CurveEnsemble::predict(int member, const Eigen::VectorXd& unit) const {
+  if (!fitted()) throw std::logic_error("CurveEnsemble: not fitted");
+  if (unit.size() != dimension_)
+    throw std::invalid_argument("CurveEnsemble: a point of " + std::to_string(unit.size()) + " coordinates, the model has " +
+                                std::to_string(dimension_));
+  const Network& net = members_.at(static_cast<size_t>(member));
+  Eigen::VectorXd h = 2 * unit.array() - 1;
+  for (size_t l = 0; l < net.weight.size(); ++l) {
+    h = net.weight[l] * h + net.bias[l];
+    if (l + 1 < net.weight.size()) h = h.array().tanh();
+  }
+  return mean_.array() + scale_.array() * h.array();
+}
+
+nlohmann::json CurveEnsemble::to_json() const {
+  nlohmann::json members = nlohmann::json::array();
+  for (const auto& net : members_) {
+    nlohmann::json layers = nlohmann::json::array();
+    for (size_t l = 0; l < net.weight.size(); ++l)
+      layers.push_back({{"weight", matrix_json(net.weight[l])},
+                        {"bias", std::vector<double>(net.bias[l].data(), net.bias[l].data() + net.bias[l].size())}});
+    members.push_back(layers);
+  }
+  return {{"dimension", dimension_},
+          {"output_mean", std::vector<double>(mean_.data(), mean_.data() + mean_.size())},
+          {"output_scale", std::vector<double>(scale_.data(), scale_.data() + scale_.size())},
+          {"members", members}};
+}
+
+CurveEnsemble CurveEnsemble::from_json(const nlohmann::json& j, const std::string& where) {
+  try {
+    CurveEnsemble e;
+    e.dimension_ = j.at("dimension").get<int>();
+    e.mean_ = vector_from(j.at("output_mean"));
+    e.scale_ = vector_from(j.at("output_scale"));
+    if (e.mean_.size() != e.scale_.size()) throw std::invalid_argument("output_mean and output_scale differ in length");
+    for (const auto& layers : j.at("members")) {
+      Network net;
+      Eigen::Index in = e.dimension_;
+      for (const auto& layer : layers) {
+        net.weight.push_back(matrix_from(layer.at("weight")));
+        net.bias.push_back(vector_from(layer.at("bias")));
+        if (net.weight.back().cols() != in || net.bias.back().size() != net.weight.back().rows())
+          throw std::invalid_argument("a layer's shape does not follow the previous one");
+        in = net.weight.back().rows();
+      }
+      if (in != e.mean_.size()) throw std::invalid_argument("the last layer does not give the outputs");
+      e.members_.push_back(std::move(net));
+    }
+    if (e.members_.size() < 2) throw std::invalid_argument("fewer than 2 members");
+    return e;
+  } catch (const std::exception& ex) {
+    throw std::invalid_argument(where + ": " + ex.what());
+  }
+}
+
+}  // namespace demcal::surrogate

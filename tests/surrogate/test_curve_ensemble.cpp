@@ -1,0 +1,172 @@
+// The "mlp" kind: an ensemble of MLPs (trained with LibTorch in the plugin) that predicts curves,
+// scored by its owner's fitness of a curve, on synthetic problems with a known answer.
+#include "demcal/surrogate/curve_ensemble.hpp"
+#include "demcal/surrogate/surrogate.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+using namespace demcal::surrogate;
+
+namespace {
+
+double uniform(std::mt19937_64& rng) { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; }
+
+// A family of softening force-displacement curves on 16 points: stiffness a, strength b.
+constexpr int kPoints = 16;
+Eigen::VectorXd curve(const Eigen::VectorXd& unit) {
+  const double stiffness = 1 + 4 * unit[0], strength = 1 + unit[1];
+  Eigen::VectorXd f(kPoints);
+  for (int k = 0; k < kPoints; ++k) {
+    const double w = static_cast<double>(k) / (kPoints - 1);
+    f[k] = strength * std::tanh(stiffness * w / strength);
+  }
+  return f;
+}
+
+// The "measurement": the curve at (0.3, 0.6).
+const Eigen::VectorXd kMeasured = curve((Eigen::VectorXd(2) << 0.3, 0.6).finished());
+double fitness_of(const Eigen::VectorXd& outputs) { return (outputs - kMeasured).norm(); }
+
+std::vector<TrainingRow> rows_of(int n, std::uint64_t seed, double extent = 1.0) {
+  std::mt19937_64 rng(seed);
+  std::vector<TrainingRow> rows;
+  for (int i = 0; i < n; ++i) {
+    Eigen::VectorXd u(2);
+    u << extent * uniform(rng), extent * uniform(rng);
+    const Eigen::VectorXd c = curve(u);
+    rows.push_back({u, fitness_of(c), c});
+  }
+  return rows;
+}
+
+SurrogateOptions mlp_options() {
+  SurrogateOptions o;
+  o.kind = "mlp";
+  o.gp.log_transform = LogTransform::never;
+  return o;
+}
+
+}  // namespace
+
+TEST(CurveEnsemble, ReproducesAKnownFamilyOfCurvesDeterministically) {
+  const auto train = rows_of(60, 1), test = rows_of(40, 2);
+  Eigen::MatrixXd X(60, 2), Y(60, kPoints);
+  for (int i = 0; i < 60; ++i) {
+    X.row(i) = train[static_cast<size_t>(i)].unit.transpose();
+    Y.row(i) = train[static_cast<size_t>(i)].outputs.transpose();
+  }
+  CurveEnsemble a, b;
+  ASSERT_TRUE(a.fit(X, Y, MlpOptions{}));
+  ASSERT_TRUE(b.fit(X, Y, MlpOptions{}));
+  EXPECT_EQ(a.members(), 5);
+  EXPECT_EQ(a.outputs(), kPoints);
+  double squares = 0;
+  for (const auto& r : test) {
+    Eigen::VectorXd mean = Eigen::VectorXd::Zero(kPoints);
+    for (int m = 0; m < a.members(); ++m) {
+      const Eigen::VectorXd p = a.predict(m, r.unit);
+      EXPECT_EQ((p - b.predict(m, r.unit)).norm(), 0.0) << "the same rows and options give the same model";
+      mean += p / a.members();
+    }
+    squares += (mean - r.outputs).squaredNorm() / kPoints;
+  }
+  // The forces span 0..2: an RMS error of 1 % of that on held-out points.
+  EXPECT_LT(std::sqrt(squares / static_cast<double>(test.size())), 0.02);
+  // A model file predicts what the model does.
+  const CurveEnsemble c = CurveEnsemble::from_json(a.to_json(), "test");
+  EXPECT_LT((c.predict(2, test[0].unit) - a.predict(2, test[0].unit)).norm(), 1e-12);
+}
+
+TEST(SurrogateModel, MlpKindScoresPredictedCurvesWithItsOwnersFitness) {
+  SurrogateModel unhooked(mlp_options());
+  EXPECT_THROW(unhooked.fit(rows_of(30, 3)), std::invalid_argument) << "an mlp model needs the fitness of a curve";
+
+  CurveHooks hooks;
+  hooks.fitness = fitness_of;
+  SurrogateModel model(mlp_options(), hooks);
+  ASSERT_TRUE(model.fit(rows_of(60, 3)));
+  EXPECT_FALSE(model.log_transformed());
+  EXPECT_EQ(model.dimension(), 2);
+  // The predicted fitness follows the true one, and is smallest near the measurement's parameters.
+  const auto test = rows_of(40, 4);
+  double error = 0, spread = 0, mean = 0;
+  for (const auto& r : test) mean += r.fitness / static_cast<double>(test.size());
+  for (const auto& r : test) {
+    error += std::abs(model.predict(r.unit).fitness - r.fitness);
+    spread += std::abs(r.fitness - mean);
+  }
+  EXPECT_LT(error / spread, 0.05) << "relative error (1 = no better than the mean)";
+  const Eigen::VectorXd truth = (Eigen::VectorXd(2) << 0.3, 0.6).finished();
+  const Eigen::VectorXd far = (Eigen::VectorXd(2) << 0.9, 0.1).finished();
+  EXPECT_LT(model.predict(truth).fitness, 0.2 * model.predict(far).fitness);
+  EXPECT_GT(model.score(truth), model.score(far)) << "expected improvement prefers the basin";
+
+  // The members disagree more where there are no data: trained on [0, 0.5]², asked at (0.95, 0.95).
+  SurrogateModel corner(mlp_options(), hooks);
+  ASSERT_TRUE(corner.fit(rows_of(40, 5, 0.5)));
+  double inside = 0;
+  const auto near_rows = rows_of(20, 6, 0.5);
+  for (const auto& r : near_rows) inside += corner.predict(r.unit).sd / static_cast<double>(near_rows.size());
+  EXPECT_GT(corner.predict((Eigen::VectorXd(2) << 0.95, 0.95).finished()).sd, 4 * inside);
+
+  // A model file, given its hooks again, predicts what the model does.
+  SurrogateModel loaded = SurrogateModel::from_json(model.to_json(), "test");
+  loaded.set_hooks(hooks);
+  EXPECT_DOUBLE_EQ(loaded.predict(truth).fitness, model.predict(truth).fitness);
+  EXPECT_DOUBLE_EQ(loaded.score(far), model.score(far));
+}
+
+TEST(CrossValidation, MlpKindReportsErrorAndCoverage) {
+  CurveHooks hooks;
+  hooks.fitness = fitness_of;
+  auto rows = rows_of(50, 7);
+  rows.push_back({(Eigen::VectorXd(2) << 0.5, 0.5).finished(), NAN, Eigen::VectorXd()});  // a failed run
+  const auto cv = cross_validate(rows, mlp_options(), 5, hooks);
+  EXPECT_EQ(cv.finite_rows, 50);
+  EXPECT_EQ(cv.failed_rows, 1);
+  EXPECT_LT(cv.relative_error, 0.1);
+  EXPECT_GE(cv.coverage90, 0.75);
+}
+
+// "bo" with the mlp kind: the optimiser is told fitness values only and finds each told point's
+// curves through CurveHooks::outputs_at; it reaches the measurement's basin and resumes exactly.
+TEST(BayesOptimiser, MlpKindFindsTheBasinAndResumesExactly) {
+  demcal::optimise::ParameterSpace space;
+  space.add("a", 0, 1);
+  space.add("b", 0, 1);
+  demcal::optimise::OptimiserOptions o;
+  o.population = 8;
+  o.max_evaluations = 20;
+  o.seed = 3;
+  CurveHooks hooks;
+  hooks.fitness = fitness_of;
+  EXPECT_THROW(make_bayes_optimiser(space, o, mlp_options(), {}, hooks), std::invalid_argument)
+      << "without outputs_at, bo cannot train on curves";
+  hooks.outputs_at = [](const Eigen::VectorXd& unit) { return curve(unit); };
+  auto run = [&](int stop_after) {
+    auto opt = make_bayes_optimiser(space, o, mlp_options(), {}, hooks);
+    std::vector<double> history;
+    int round = 0;
+    while (!opt->done()) {
+      if (round++ == stop_after) {
+        const nlohmann::json state = nlohmann::json::parse(opt->save_state().dump());
+        opt = make_bayes_optimiser(space, o, mlp_options(), {}, hooks);
+        opt->load_state(state);
+      }
+      const auto batch = opt->ask();
+      std::vector<double> values;
+      for (const auto& x : batch) values.push_back(fitness_of(curve(space.to_unit(x))));
+      opt->tell(values);
+      history.push_back(opt->best_value());
+    }
+    EXPECT_EQ(opt->evaluations(), 20);
+    return history;
+  };
+  const auto straight = run(-1);
+  // The 12 model-driven points after the design improve its best by more than an order of magnitude.
+  EXPECT_LT(straight.back(), straight.front() / 20) << "design best " << straight.front();
+  EXPECT_EQ(run(4), straight);
+}
