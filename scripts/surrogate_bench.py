@@ -4,6 +4,9 @@ arch against a measurement with a hidden truth (data/arch/surrogate), over seeds
 PSO/TBPSO/GA with pre-screening and Bayesian optimisation; then one wall campaign (data/walls).
 
 usage: surrogate_bench.py DEMCAL OUT_DIR [--seeds N] [--threads T] [--wall-seeds N] [--skip-wall]
+                          [--skip-arch] [--rows TEXT,...]
+
+--rows keeps the arch rows whose label contains one of the texts (e.g. "mlp,bo").
 
 Writes OUT_DIR/surrogate-bench.md (the tables) and OUT_DIR/surrogate-bench.json (every number).
 Campaigns already finished in OUT_DIR are read back (result.json), so an interrupted run continues.
@@ -25,6 +28,8 @@ ARCH_ROWS = [  # label, algorithm, budget, surrogate options (None = off)
     ("GA + screen (EI)", "ga", 80, {"k": 5, "pool_factor": 5, "acquisition": "ei"}),
     ("TBPSO + screen (LCB)", "tbpso", 80, {"k": 5, "pool_factor": 5, "acquisition": "lcb"}),
     ("bo (EI)", "bo", 80, {"acquisition": "ei"}),
+    ("TBPSO + screen (EI, mlp)", "tbpso", 80, {"k": 5, "pool_factor": 5, "acquisition": "ei", "kind": "mlp"}),
+    ("bo (EI, mlp)", "bo", 80, {"acquisition": "ei", "kind": "mlp"}),
 ]
 
 
@@ -113,7 +118,7 @@ def arch_table(a, results, report):
     target = 1.02 * best_known
     lines = ["| row | budget | simulations to within 2 % (q1 / median / q3) | reached | simulations to within 10 % (q1 / median / q3) | reached | best at 60 simulations (median) | final fitness (median) | friction error deg (q1 / median / q3) | within 1 deg |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
-    for label, algorithm, budget, surrogate in ARCH_ROWS:
+    for label, algorithm, budget, surrogate in a.arch_rows:
         sims, sims10, at60, errors, finals = [], [], [], [], []
         for seed in range(1, a.seeds + 1):
             r = results[(label, seed)]
@@ -151,15 +156,20 @@ def main():
     p.add_argument("--wall-seeds", type=int, default=3)
     p.add_argument("--skip-wall", action="store_true")
     p.add_argument("--skip-arch", action="store_true")
+    p.add_argument("--rows", default="")
     a = p.parse_args()
+    wanted = [t for t in a.rows.split(",") if t]
+    a.arch_rows = [r for r in ARCH_ROWS if not wanted or any(t in r[0] for t in wanted)]
     os.makedirs(a.out, exist_ok=True)
     report = {"arch": {}, "wall": {}}
     base = os.path.join(ROOT, "data/arch/surrogate/campaign.json")
     results = {}
     md = []
     for seed in range(1, 0 if a.skip_arch else a.seeds + 1):  # seed-major: every row has the same seeds done at any time
-        for label, algorithm, budget, surrogate in ARCH_ROWS:
+        for label, algorithm, budget, surrogate in a.arch_rows:
             tag = "%s-%d-%s-s%d" % (algorithm, budget, (surrogate or {}).get("acquisition", "off"), seed)
+            if (surrogate or {}).get("kind", "gp") != "gp":
+                tag = tag.replace("-s%d" % seed, "-%s-s%d" % (surrogate["kind"], seed))
             results[(label, seed)] = run_campaign(a.demcal, base, os.path.join(a.out, "arch", tag), algorithm, budget,
                                                   surrogate, seed, a.threads)
             print("done", label, seed, results[(label, seed)]["best"]["fitness"], flush=True)
