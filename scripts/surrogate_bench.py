@@ -179,13 +179,17 @@ def main():
     if not a.skip_wall:
         wall = os.path.join(ROOT, "data/walls/SW.30.1.json")
         wall_rows = [("TBPSO alone", "tbpso", 100, None), ("TBPSO + screen (EI)", "tbpso", 30, {"k": 5, "pool_factor": 5}),
-                     ("bo (EI)", "bo", 30, {})]
+                     ("bo (EI)", "bo", 30, {}),
+                     ("TBPSO + screen (EI, mlp)", "tbpso", 30, {"k": 5, "pool_factor": 5, "kind": "mlp"}),
+                     ("bo (EI, mlp)", "bo", 30, {"kind": "mlp"})]
         wlines = ["| row | budget | best fitness at 30 simulations (per seed) | best fitness at the budget (per seed) |",
                   "| --- | --- | --- | --- |"]
         for label, algorithm, budget, surrogate in wall_rows:
             at30, final = [], []
             for seed in range(1, a.wall_seeds + 1):
                 tag = "%s-%d-s%d" % (algorithm, budget, seed)
+                if (surrogate or {}).get("kind", "gp") != "gp":
+                    tag = tag.replace("-s%d" % seed, "-%s-s%d" % (surrogate["kind"], seed))
                 r = run_campaign(a.demcal, wall, os.path.join(a.out, "wall", tag), algorithm, budget, surrogate, seed, a.threads)
                 conv = r["convergence"]
                 at30.append(conv[min(29, len(conv) - 1)])

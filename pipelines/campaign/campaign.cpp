@@ -27,6 +27,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 using detail::build_scenes;
+using detail::case_curve_grid;
 using detail::finite_or_null;
 using detail::FitnessWorkers;
 using detail::identifiability;
@@ -101,16 +102,7 @@ SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCas
   std::vector<std::shared_ptr<const CurveGrid>> grids;
   for (size_t k = 0; k < config.cases.size(); ++k) {
     std::shared_ptr<const CurveGrid> grid;
-    if (curves) {
-      try {
-        grid = std::make_shared<const CurveGrid>(make_curve_grid(prepared.measured[k], config.objective_options,
-                                                                 config.objective == 2 ? prepared.objective2[k].get() : nullptr,
-                                                                 config.cases[k].weight));
-      } catch (const std::exception& e) {
-        throw CampaignError(config.source + ": surrogate kind mlp: " + e.what());
-      }
-      grids.push_back(grid);
-    }
+    if (curves) grids.push_back(grid = case_curve_grid(config, prepared, k));
     s.archived_cases.push_back({backend.model_hash(k), prepared.objective_keys[k], config.cases[k].weight, grid});
   }
   if (curves) {

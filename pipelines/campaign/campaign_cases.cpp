@@ -51,6 +51,16 @@ std::vector<dem::Scene> build_scenes(const CampaignConfig& config) {
   return scenes;
 }
 
+std::shared_ptr<const CurveGrid> case_curve_grid(const CampaignConfig& config, const PreparedCases& prepared, size_t k) {
+  try {
+    return std::make_shared<const CurveGrid>(make_curve_grid(prepared.measured[k], config.objective_options,
+                                                             config.objective == 2 ? prepared.objective2[k].get() : nullptr,
+                                                             config.cases[k].weight));
+  } catch (const std::exception& e) {
+    throw CampaignError(config.source + ": case '" + config.cases[k].name + "': " + e.what());
+  }
+}
+
 PreparedCases prepare_cases(const CampaignConfig& config) {
   PreparedCases p;
   for (const auto& c : config.cases) {
@@ -81,16 +91,8 @@ namespace demcal::pipelines {
 std::vector<CaseCurveGrid> campaign_curve_grids(const CampaignConfig& config) {
   const detail::PreparedCases prepared = detail::prepare_cases(config);
   std::vector<CaseCurveGrid> grids;
-  for (size_t k = 0; k < config.cases.size(); ++k) {
-    try {
-      grids.push_back({prepared.objective_keys[k],
-                       std::make_shared<const CurveGrid>(make_curve_grid(
-                           prepared.measured[k], config.objective_options,
-                           config.objective == 2 ? prepared.objective2[k].get() : nullptr, config.cases[k].weight))});
-    } catch (const std::exception& e) {
-      throw CampaignError(config.source + ": case '" + config.cases[k].name + "': " + e.what());
-    }
-  }
+  for (size_t k = 0; k < config.cases.size(); ++k)
+    grids.push_back({prepared.objective_keys[k], detail::case_curve_grid(config, prepared, k)});
   return grids;
 }
 

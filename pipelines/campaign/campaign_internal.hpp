@@ -37,6 +37,8 @@ struct PreparedCases {
 
 // Throws CampaignError naming the file, key or parameter at fault.
 PreparedCases prepare_cases(const CampaignConfig& config);
+// The "mlp" surrogate's curve grid of case k (surrogate_data.hpp). Throws CampaignError naming the case.
+std::shared_ptr<const CurveGrid> case_curve_grid(const CampaignConfig& config, const PreparedCases& prepared, size_t k);
 // The cases' scenes, each checked to know every parameter of the space.
 std::vector<dem::Scene> build_scenes(const CampaignConfig& config);
 std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, const PreparedCases& prepared,

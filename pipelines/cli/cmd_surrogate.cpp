@@ -46,15 +46,18 @@ LoadedProblem load(const Flags& f) {
   if (f.campaign.empty())
     throw std::runtime_error("the mlp kind predicts curves and needs the measurement they are scored against: "
                              "name the campaign file with --campaign");
-  std::shared_ptr<const CurveGrid> grid;
+  std::shared_ptr<CurveGrid> grid;
   for (const auto& g : campaign_curve_grids(load_campaign(f.campaign)))
-    if (g.objective_key == p.objective_key) grid = g.grid;
+    if (g.objective_key == p.objective_key) grid = std::make_shared<CurveGrid>(*g.grid);
   if (!grid)
     throw std::runtime_error(f.campaign + ": no case of this campaign has objective key " + p.objective_key +
                              " (the archive's runs were scored against another measurement, objective or smoother)");
+  grid->case_weight = 1.0;  // the rows are one scene's fitness, unweighted
   std::vector<ArchivedCase> cases = {{p.model_hash, p.objective_key, 1.0, grid}};
   p.rows = archive_training_rows(archive, p.space, cases);
-  loaded.hooks.fitness = [grid](const Eigen::VectorXd& outputs) { return curve_fitness(outputs, {grid}); };
+  loaded.hooks.fitness = [grid = std::shared_ptr<const CurveGrid>(grid)](const Eigen::VectorXd& outputs) {
+    return curve_fitness(outputs, {grid});
+  };
   return loaded;
 }
 

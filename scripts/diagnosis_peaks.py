@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Peaks of a diagnosis's held-out predictions (docs/diagnose.md): for the base model and every tried
-candidate of a finished `demcal diagnose ... --held-out CASES`, simulate the held-out cases with the
-fitted parameters (`demcal predict`, the candidate's extended scenes) and tabulate the RMS error, the
-peak force and the displacement at the peak against the measurement's.
+"""Peaks of a diagnosis's fits (docs/diagnose.md): for the base model and every tried candidate of a
+finished `demcal diagnose`, simulate the named cases of its campaign (fitted or held out) with the
+fitted parameters (`demcal predict`, the candidate's extended scenes) and tabulate the RMS error,
+the peak force and the displacement at the peak against the measurement's.
 
-usage: held_out_peaks.py DEMCAL CAMPAIGN.json DIAGNOSIS_DIR CASE[,CASE...] [--out DIR]
+usage: diagnosis_peaks.py DEMCAL CAMPAIGN.json DIAGNOSIS_DIR CASE[,CASE...] [--out DIR]
 
-Writes DIR/held-out-peaks.md and .json (DIR defaults to DIAGNOSIS_DIR/held-out-peaks).
+Writes DIR/peaks.md and DIR/peaks.json (DIR defaults to DIAGNOSIS_DIR/peaks).
 """
 import argparse
 import json
@@ -15,7 +15,7 @@ import subprocess
 
 
 def predict(demcal, campaign, cases, scenes, params, out):
-    """prediction.json of the held-out cases, each with its scene file (None = the campaign's)."""
+    """prediction.json of the named cases, each with its scene file (None = the campaign's)."""
     base_dir = os.path.dirname(os.path.abspath(campaign))
     config = json.load(open(campaign))
     config["cases"] = [c for c in config["cases"] if c["name"] in cases]
@@ -44,7 +44,7 @@ def main():
     p.add_argument("--out")
     a = p.parse_args()
     cases = a.cases.split(",")
-    out = a.out or os.path.join(a.diagnosis, "held-out-peaks")
+    out = a.out or os.path.join(a.diagnosis, "peaks")
     d = json.load(open(os.path.join(a.diagnosis, "diagnosis.json")))
     models = [("base", d["base"]["params"], None)]
     for c in d["candidates"]:
@@ -67,8 +67,8 @@ def main():
             label, c["name"], c["rms_error"] / 1e3, c["measured_peak"] / 1e3, c["measured_peak_displacement"] * 1e3,
             c["simulated_peak"] / 1e3, c["simulated_peak_displacement"] * 1e3, 100 * c["peak_error"]))
     os.makedirs(out, exist_ok=True)
-    open(os.path.join(out, "held-out-peaks.md"), "w").write("\n".join(lines) + "\n")
-    json.dump(report, open(os.path.join(out, "held-out-peaks.json"), "w"), indent=1)
+    open(os.path.join(out, "peaks.md"), "w").write("\n".join(lines) + "\n")
+    json.dump(report, open(os.path.join(out, "peaks.json"), "w"), indent=1)
     print("\n".join(lines))
 
 
