@@ -23,6 +23,7 @@ struct DiagnoseFlags {
   int scatter_runs = 2;
   double evidence = 10;
   std::string candidate_algorithm = "bo";
+  std::string surrogate_kind = "gp";
   bool resume = false, no_report = false, quiet = false;
 };
 
@@ -50,6 +51,7 @@ void run(const DiagnoseFlags& f) {
   o.evidence_threshold = f.evidence;
   o.scatter_runs = f.scatter_runs;
   o.candidate_algorithm = f.candidate_algorithm;
+  o.surrogate_kind = f.surrogate_kind;
   o.resume = f.resume;
   o.report = !f.no_report;
   o.progress = !f.quiet;
@@ -74,6 +76,9 @@ void setup(CLI::App& app) {
   sub->add_option("--candidate-simulations", flags->candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");
   sub->add_option("--candidate-algorithm", flags->candidate_algorithm,
                   "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
+  sub->add_option("--surrogate-kind", flags->surrogate_kind,
+                  "Surrogate of the refinement's and candidates' searches: gp (default, as measured) | mlp")
+      ->check(CLI::IsMember({"gp", "mlp"}));
   sub->add_option("--evidence", flags->evidence, "Criterion fall needed to accept an effect");
   sub->add_option("--scatter-runs", flags->scatter_runs,
                   "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)");

@@ -35,6 +35,7 @@ void DiagnoseOptions::Validate() const {
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
   if (!(held_out_tolerance >= 0)) fail("held_out_tolerance", std::to_string(held_out_tolerance), "must be >= 0");
   if (candidate_algorithm.empty()) fail("candidate_algorithm", "\"\"", "must name an optimiser");
+  if (surrogate_kind != "gp" && surrogate_kind != "mlp") fail("surrogate_kind", "\"" + surrogate_kind + "\"", "must be gp or mlp");
   if (!(candidate_initial_step > 0 && candidate_initial_step <= 0.5))
     fail("candidate_initial_step", std::to_string(candidate_initial_step), "must be in (0, 0.5]");
   const bool wide = narrow_log_factor == 0 && narrow_linear_share == 0;
@@ -464,6 +465,7 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   c.report = options.report;
   c.optimiser.max_evaluations = evaluations;
   c.optimiser.algorithm = options.candidate_algorithm;
+  c.surrogate.options.kind = options.surrogate_kind;
   const bool local = options.candidate_algorithm.rfind("nlopt:", 0) == 0;
   if (local || options.candidate_algorithm == "bo") {
     // Warm start: the base best with the effect at its best-explaining probe, clipped to the box

@@ -322,7 +322,7 @@ TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
     o.timeout_s = 120;
     return run_process(o);
   };
-  ASSERT_TRUE(demcal({"surrogate", "check", "--archive", archive}, "check.json").ok());
+  ASSERT_TRUE(demcal({"surrogate", "check", "--archive", archive, "--kind", "gp"}, "check.json").ok());
   const json check = read_json(dir / "check.json");
   RunArchive a(archive);
   EXPECT_EQ(check["rows"].get<std::int64_t>(), a.run_count());
@@ -332,7 +332,8 @@ TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
   EXPECT_LE(cv["coverage90"].get<double>(), 1.0);
   EXPECT_LT(cv["relative_error"].get<double>(), 1.0) << "better than predicting the mean";
 
-  ASSERT_TRUE(demcal({"surrogate", "train", "--archive", archive, "--out", (dir / "model.json").string()}, "train.json").ok());
+  ASSERT_TRUE(demcal({"surrogate", "train", "--archive", archive, "--kind", "gp", "--out", (dir / "model.json").string()},
+                     "train.json").ok());
   EXPECT_EQ(read_json(dir / "model.json")["format"], "demcal-surrogate");
   EXPECT_EQ(read_json(dir / "train.json")["rows"], check["rows"]);
 

@@ -138,7 +138,9 @@ TEST(FailureClassifier, LearnsTheFailureRegion) {
   EXPECT_GT(c.probability(inside), 0.8);
   EXPECT_LT(c.probability(outside), 0.1);
   // Expected improvement is discounted by the failure probability.
-  SurrogateModel model;
+  SurrogateOptions gp;
+  gp.kind = "gp";
+  SurrogateModel model(gp);
   ASSERT_TRUE(model.fit(rows));
   EXPECT_LT(model.score(inside), model.score(outside) + 1e-12);
 }

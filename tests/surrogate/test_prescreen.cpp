@@ -33,6 +33,13 @@ struct Problem {
   }
 };
 
+// These tests are of the Gaussian process's screening and search.
+SurrogateOptions gp_kind() {
+  SurrogateOptions s;
+  s.kind = "gp";
+  return s;
+}
+
 }  // namespace
 
 // The optimiser is told simulated values only: every value it holds as best comes from an
@@ -46,7 +53,7 @@ TEST(Prescreen, OptimiserOnlyEverHoldsSimulatedValues) {
     o.max_evaluations = 80;
     o.evaluations_per_iteration = 5;
     o.seed = 3;
-    SurrogateOptions s;
+    SurrogateOptions s = gp_kind();
     s.k = 5;
     s.pool_factor = 4;
     auto opt = optimise::make_optimiser(space_of(problem.f), o);
@@ -97,7 +104,7 @@ TEST(BayesOptimiser, FindsTheMinimumAndResumesExactly) {
   o.population = 10;
   o.max_evaluations = 30;
   o.seed = 2;
-  SurrogateOptions s;
+  SurrogateOptions s = gp_kind();
   auto run = [&](int stop_after) {
     auto opt = make_bayes_optimiser(space_of(problem.f), o, s);
     std::vector<double> history;
@@ -131,13 +138,13 @@ TEST(BayesOptimiser, StartsItsDesignAtTheGivenPoint) {
   o.seed = 2;
   const Eigen::VectorXd start = space.to_physical(Eigen::VectorXd::Constant(space.dimension(), 0.3));
   o.initial_point.assign(start.data(), start.data() + start.size());
-  auto opt = make_bayes_optimiser(space, o, SurrogateOptions{});
+  auto opt = make_bayes_optimiser(space, o, gp_kind());
   const auto batch = opt->ask();
   ASSERT_FALSE(batch.empty());
   EXPECT_LT((batch.front() - start).norm(), 1e-9 * (1 + start.norm()));
   auto plain = o;
   plain.initial_point.clear();
-  const auto other = make_bayes_optimiser(space, plain, SurrogateOptions{})->ask();
+  const auto other = make_bayes_optimiser(space, plain, gp_kind())->ask();
   EXPECT_GT((other.front() - start).norm(), 1e-6);  // the design's own first point differs
   for (std::size_t i = 1; i < batch.size(); ++i) EXPECT_EQ(batch[i], other[i]);  // the rest is unchanged
 }
@@ -152,7 +159,7 @@ TEST(CrossValidation, ReportsErrorAndCoverage) {
     const auto space = space_of(problem.f);
     rows.push_back({u, problem(space.to_physical(u))});
   }
-  const CrossValidation cv = cross_validate(rows, SurrogateOptions{}, 5);
+  const CrossValidation cv = cross_validate(rows, gp_kind(), 5);
   EXPECT_EQ(cv.rows, 60);
   EXPECT_EQ(cv.finite_rows + cv.failed_rows, 60);
   EXPECT_GT(cv.failed_rows, 0);

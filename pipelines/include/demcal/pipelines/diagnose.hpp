@@ -149,6 +149,9 @@ struct DiagnoseOptions {
   // campaign's population and polish.
   std::string candidate_algorithm = "bo";
   double candidate_initial_step = 0.1;
+  // The surrogate kind of the refinement's and the candidates' searches ("gp" | "mlp"), whatever the
+  // campaign's: the loop's measurements (docs/diagnose.md) were made with "gp".
+  std::string surrogate_kind = "gp";
   // Data the fits do not use, to check them: the campaign's cases named here are left out of every
   // calibration of the diagnosis (at least one case must stay), and channels of weight 0 are not
   // fitted anyway. Both are simulated with every fit; an accepted effect whose fit makes that data

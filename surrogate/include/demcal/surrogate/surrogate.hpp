@@ -9,8 +9,8 @@
 // - SurrogateModel, of one of two kinds, plus a FailureClassifier trained on all rows (failed =
 //   non-finite fitness: unstable runs, no common window with the measurement, a crashed external
 //   program). Both are deterministic functions of the rows and the options.
-//   - "gp" (default): a GaussianProcess on the finite fitness values.
-//   - "mlp": a CurveEnsemble (curve_ensemble.hpp) on the rows' outputs, a run's resampled curves;
+//   - "gp": a GaussianProcess on the finite fitness values.
+//   - "mlp" (default): a CurveEnsemble (curve_ensemble.hpp) on the rows' outputs, a run's resampled curves;
 //     the owner's CurveHooks::fitness turns each member's predicted curves into a fitness, and the
 //     prediction is the members' mean and spread (model space: log fitness when all are > 0, unless
 //     gp.log_transform says "never"), the spread capped at that of the training targets, as a GP's
@@ -95,7 +95,8 @@ Acquisition parse_acquisition(const std::string& text);  // "ei" | "lcb"
 
 // Campaign key "surrogate" (docs/surrogate.md).
 struct SurrogateOptions {
-  std::string kind = "gp";           // the model kind: "gp" or "mlp"
+  std::string kind = "mlp";          // the model kind: "mlp" or "gp" (docs/surrogate.md: chosen by
+                                     // the benchmark of docs/benchmarks.md)
   int pool_factor = 5;               // pool = pool_factor x batch (the candidate and pool_factor - 1
                                      // alternatives per slot), >= 1
   int k = 0;                         // candidates simulated per iteration; 0 = the whole batch
