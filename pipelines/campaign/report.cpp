@@ -375,8 +375,13 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
   if (result.surrogate_used) {
     md << "## Surrogate\n\n";
     const long proposed = result.surrogate_simulated + result.surrogate_screened_out;
-    md << "Model: " << result.surrogate_kind << " (Gaussian process, ARD Matern-5/2, fitted nugget); acquisition "
-       << surrogate::to_string(config.surrogate.options.acquisition) << ". Leave-one-out relative error of the final model: "
+    const bool mlp = result.surrogate_kind == "mlp";
+    md << "Model: " << result.surrogate_kind
+       << (mlp ? " (an ensemble of " + std::to_string(config.surrogate.options.mlp.members) +
+                     " neural networks predicting the curves, scored by the campaign's objective)"
+               : std::string(" (Gaussian process on the fitness, ARD Matern-5/2, fitted nugget)"))
+       << "; acquisition " << surrogate::to_string(config.surrogate.options.acquisition) << ". "
+       << (mlp ? "5-fold" : "Leave-one-out") << " relative error of the final model: "
        << (std::isfinite(result.surrogate_cv_error) ? fmt(result.surrogate_cv_error, "%.3f") : std::string("n/a"))
        << " (0 = exact, 1 = no better than the mean).\n\n";
     if (config.optimiser.algorithm == "bo") {
