@@ -1,4 +1,5 @@
 #include "demcal/surrogate/curve_ensemble.hpp"
+#include "options_json.hpp"
 
 #include "demcal/smoothing/regression_ensemble.hpp"
 
@@ -75,30 +76,18 @@ nlohmann::json MlpOptions::to_json() const {
 }
 
 MlpOptions MlpOptions::from_json(const nlohmann::json& j, const std::string& where) {
-  if (!j.is_object()) throw std::invalid_argument(where + ": must be an object");
-  MlpOptions o;
-  for (const auto& [key, value] : j.items()) {
-    try {
-      if (key == "members") o.members = value.get<int>();
-      else if (key == "hidden_layers") o.hidden_layers = value.get<int>();
-      else if (key == "hidden_width") o.hidden_width = value.get<int>();
-      else if (key == "epochs") o.epochs = value.get<int>();
-      else if (key == "learning_rate") o.learning_rate = value.get<double>();
-      else if (key == "final_learning_rate") o.final_learning_rate = value.get<double>();
-      else if (key == "weight_decay") o.weight_decay = value.get<double>();
-      else if (key == "bootstrap") o.bootstrap = value.get<bool>();
-      else if (key == "seed") o.seed = value.get<std::uint64_t>();
-      else throw std::invalid_argument("unknown key");
-    } catch (const std::exception& e) {
-      throw std::invalid_argument(where + "." + key + " = " + value.dump() + ": " + e.what());
-    }
-  }
-  try {
-    o.Validate();
-  } catch (const std::exception& e) {
-    throw std::invalid_argument(where + ": " + e.what());
-  }
-  return o;
+  return detail::options_from_json<MlpOptions>(j, where, [&](auto& o, const std::string& key, const nlohmann::json& value) {
+    if (key == "members") o.members = value.get<int>();
+    else if (key == "hidden_layers") o.hidden_layers = value.get<int>();
+    else if (key == "hidden_width") o.hidden_width = value.get<int>();
+    else if (key == "epochs") o.epochs = value.get<int>();
+    else if (key == "learning_rate") o.learning_rate = value.get<double>();
+    else if (key == "final_learning_rate") o.final_learning_rate = value.get<double>();
+    else if (key == "weight_decay") o.weight_decay = value.get<double>();
+    else if (key == "bootstrap") o.bootstrap = value.get<bool>();
+    else if (key == "seed") o.seed = value.get<std::uint64_t>();
+    else throw std::invalid_argument("unknown key");
+  });
 }
 
 bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options) {

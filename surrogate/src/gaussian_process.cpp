@@ -1,4 +1,5 @@
 #include "demcal/surrogate/gaussian_process.hpp"
+#include "options_json.hpp"
 
 #include <Eigen/Cholesky>
 #include <nlopt.h>
@@ -178,29 +179,17 @@ nlohmann::json GpOptions::to_json() const {
 }
 
 GpOptions GpOptions::from_json(const nlohmann::json& j, const std::string& where) {
-  GpOptions o;
-  if (!j.is_object()) throw std::invalid_argument(where + ": must be an object");
-  for (const auto& [key, value] : j.items()) {
-    try {
-      if (key == "restarts") o.restarts = value.get<int>();
-      else if (key == "max_iterations") o.max_iterations = value.get<int>();
-      else if (key == "seed") o.seed = value.get<std::uint64_t>();
-      else if (key == "min_length") o.min_length = value.get<double>();
-      else if (key == "max_length") o.max_length = value.get<double>();
-      else if (key == "min_noise") o.min_noise = value.get<double>();
-      else if (key == "max_noise") o.max_noise = value.get<double>();
-      else if (key == "log_transform") o.log_transform = parse_log_transform(value.get<std::string>());
-      else throw std::invalid_argument("unknown key");
-    } catch (const std::exception& e) {
-      throw std::invalid_argument(where + "." + key + " = " + value.dump() + ": " + e.what());
-    }
-  }
-  try {
-    o.Validate();
-  } catch (const std::exception& e) {
-    throw std::invalid_argument(where + ": " + e.what());
-  }
-  return o;
+  return detail::options_from_json<GpOptions>(j, where, [&](auto& o, const std::string& key, const nlohmann::json& value) {
+    if (key == "restarts") o.restarts = value.get<int>();
+    else if (key == "max_iterations") o.max_iterations = value.get<int>();
+    else if (key == "seed") o.seed = value.get<std::uint64_t>();
+    else if (key == "min_length") o.min_length = value.get<double>();
+    else if (key == "max_length") o.max_length = value.get<double>();
+    else if (key == "min_noise") o.min_noise = value.get<double>();
+    else if (key == "max_noise") o.max_noise = value.get<double>();
+    else if (key == "log_transform") o.log_transform = parse_log_transform(value.get<std::string>());
+    else throw std::invalid_argument("unknown key");
+  });
 }
 
 double GpPrediction::observation_sd() const { return std::sqrt(sd * sd + noise_sd * noise_sd); }

@@ -1,4 +1,5 @@
 #include "demcal/surrogate/surrogate.hpp"
+#include "options_json.hpp"
 
 #include <nlopt.h>
 
@@ -160,30 +161,18 @@ nlohmann::json SurrogateOptions::to_json() const {
 }
 
 SurrogateOptions SurrogateOptions::from_json(const nlohmann::json& j, const std::string& where) {
-  if (!j.is_object()) throw std::invalid_argument(where + ": must be an object");
-  SurrogateOptions o;
-  for (const auto& [key, value] : j.items()) {
-    try {
-      if (key == "kind") o.kind = value.get<std::string>();
-      else if (key == "pool_factor") o.pool_factor = value.get<int>();
-      else if (key == "k") o.k = value.get<int>();
-      else if (key == "acquisition") o.acquisition = parse_acquisition(value.get<std::string>());
-      else if (key == "lcb_kappa") o.lcb_kappa = value.get<double>();
-      else if (key == "min_runs") o.min_runs = value.get<int>();
-      else if (key == "max_training_runs") o.max_training_runs = value.get<int>();
-      else if (key == "gp") o.gp = GpOptions::from_json(value, where + ".gp");
-      else if (key == "mlp") o.mlp = MlpOptions::from_json(value, where + ".mlp");
-      else throw std::invalid_argument("unknown key");
-    } catch (const std::exception& e) {
-      throw std::invalid_argument(where + "." + key + " = " + value.dump() + ": " + e.what());
-    }
-  }
-  try {
-    o.Validate();
-  } catch (const std::exception& e) {
-    throw std::invalid_argument(where + ": " + e.what());
-  }
-  return o;
+  return detail::options_from_json<SurrogateOptions>(j, where, [&](auto& o, const std::string& key, const nlohmann::json& value) {
+    if (key == "kind") o.kind = value.get<std::string>();
+    else if (key == "pool_factor") o.pool_factor = value.get<int>();
+    else if (key == "k") o.k = value.get<int>();
+    else if (key == "acquisition") o.acquisition = parse_acquisition(value.get<std::string>());
+    else if (key == "lcb_kappa") o.lcb_kappa = value.get<double>();
+    else if (key == "min_runs") o.min_runs = value.get<int>();
+    else if (key == "max_training_runs") o.max_training_runs = value.get<int>();
+    else if (key == "gp") o.gp = GpOptions::from_json(value, where + ".gp");
+    else if (key == "mlp") o.mlp = MlpOptions::from_json(value, where + ".mlp");
+    else throw std::invalid_argument("unknown key");
+  });
 }
 
 std::vector<TrainingRow> select_training_rows(const std::vector<TrainingRow>& rows, int max_rows) {
