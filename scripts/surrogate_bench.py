@@ -50,6 +50,12 @@ def quartiles(values):
     return tuple(out)
 
 
+def campaign_tag(stem, surrogate, seed):
+    """A campaign's folder name: the stem, the surrogate kind unless gp, the seed."""
+    kind = (surrogate or {}).get("kind", "gp")
+    return "%s%s-s%d" % (stem, "" if kind == "gp" else "-" + kind, seed)
+
+
 def run_campaign(demcal, base, out, algorithm, budget, surrogate, seed, threads):
     result = os.path.join(out, "result.json")
     if os.path.exists(result):
@@ -167,9 +173,7 @@ def main():
     md = []
     for seed in range(1, 0 if a.skip_arch else a.seeds + 1):  # seed-major: every row has the same seeds done at any time
         for label, algorithm, budget, surrogate in a.arch_rows:
-            tag = "%s-%d-%s-s%d" % (algorithm, budget, (surrogate or {}).get("acquisition", "off"), seed)
-            if (surrogate or {}).get("kind", "gp") != "gp":
-                tag = tag.replace("-s%d" % seed, "-%s-s%d" % (surrogate["kind"], seed))
+            tag = campaign_tag("%s-%d-%s" % (algorithm, budget, (surrogate or {}).get("acquisition", "off")), surrogate, seed)
             results[(label, seed)] = run_campaign(a.demcal, base, os.path.join(a.out, "arch", tag), algorithm, budget,
                                                   surrogate, seed, a.threads)
             print("done", label, seed, results[(label, seed)]["best"]["fitness"], flush=True)
@@ -187,9 +191,7 @@ def main():
         for label, algorithm, budget, surrogate in wall_rows:
             at30, final = [], []
             for seed in range(1, a.wall_seeds + 1):
-                tag = "%s-%d-s%d" % (algorithm, budget, seed)
-                if (surrogate or {}).get("kind", "gp") != "gp":
-                    tag = tag.replace("-s%d" % seed, "-%s-s%d" % (surrogate["kind"], seed))
+                tag = campaign_tag("%s-%d" % (algorithm, budget), surrogate, seed)
                 r = run_campaign(a.demcal, wall, os.path.join(a.out, "wall", tag), algorithm, budget, surrogate, seed, a.threads)
                 conv = r["convergence"]
                 at30.append(conv[min(29, len(conv) - 1)])

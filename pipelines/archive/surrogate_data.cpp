@@ -222,7 +222,7 @@ ArchivedProblem find_archived_problem(const RunArchive& archive, const std::stri
   if (p.campaign_name.empty())
     throw ArchiveError(archive.path() + ": no campaign in the archive ran scene hash " + p.model_hash +
                        " (its parameter space is unknown)");
-  p.rows = archive_training_rows(archive, p.space, {{p.model_hash, p.objective_key, 1.0, nullptr}});
+  p.rows = archive_training_rows(archive, p.space, {{p.model_hash, p.objective_key, 1.0}});
   return p;
 }
 

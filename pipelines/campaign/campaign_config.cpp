@@ -296,6 +296,13 @@ double unit_factor(const std::string& unit, const std::string& where) {
   return it->second;
 }
 
+std::string surrogate_model_kind(const std::string& path) {
+  std::ifstream in(path);
+  const json model = json::parse(in, nullptr, false);
+  return model.is_object() && model.contains("kind") && model.at("kind").is_string() ? model.at("kind").get<std::string>()
+                                                                                        : std::string();
+}
+
 void parse_surrogate(const json& j, SurrogateSpec& spec, const std::string& where, const std::string& base_dir) {
   if (!j.is_object()) throw CampaignError(where + ": expected an object");
   json options = j;
@@ -306,11 +313,9 @@ void parse_surrogate(const json& j, SurrogateSpec& spec, const std::string& wher
     if (file.is_relative()) file = fs::path(base_dir) / file;
     spec.model_file = file.string();
     options.erase("model");
-    // Without a "kind", the model's own kind (an unreadable file is reported when it is loaded).
-    std::ifstream in(spec.model_file);
-    const json model_json = json::parse(in, nullptr, false);
-    if (!options.contains("kind") && model_json.is_object() && model_json.contains("kind") && model_json.at("kind").is_string())
-      options["kind"] = model_json.at("kind");
+    // Without a "kind", the model's own kind.
+    if (const std::string kind = surrogate_model_kind(spec.model_file); !options.contains("kind") && !kind.empty())
+      options["kind"] = kind;
   }
   try {
     spec.options = surrogate::SurrogateOptions::from_json(options, where);

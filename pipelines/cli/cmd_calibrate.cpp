@@ -7,7 +7,6 @@
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <iostream>
 #include <memory>
 
@@ -103,11 +102,7 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
   } else if (!f.surrogate.empty()) {
     c.surrogate.enabled = true;
     c.surrogate.model_file = f.surrogate;
-    // The model's kind rules (an unreadable file is reported when the campaign loads it).
-    std::ifstream model(f.surrogate);
-    const nlohmann::json file = nlohmann::json::parse(model, nullptr, false);
-    if (file.is_object() && file.contains("kind") && file.at("kind").is_string())
-      c.surrogate.options.kind = file.at("kind").get<std::string>();
+    if (const std::string kind = surrogate_model_kind(f.surrogate); !kind.empty()) c.surrogate.options.kind = kind;
   }
   if (!f.out.empty()) c.output = f.out;
   if (!f.archive.empty()) c.archive = f.archive;

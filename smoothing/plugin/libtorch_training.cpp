@@ -158,15 +158,13 @@ std::vector<float> train_regression(const RegressionBatch& rb) {
 
 }  // namespace demcal::smoothing::detail
 
-// The plugin's C entry points (torch_plugin_abi.hpp). Exceptions do not cross the boundary.
-extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_plugin_abi() { return demcal::smoothing::detail::kTorchPluginAbi; }
+namespace {
 
-extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_train(const demcal::smoothing::detail::TrainingBatch* batch,
-                                                        const demcal::smoothing::SmootherOptions* options,
-                                                        demcal::smoothing::detail::TrainingOutput* output,
-                                                        std::string* error) {
+// Runs `work` for a C entry point: 0, or 1 with *error set. Exceptions do not cross the boundary.
+template <class Work>
+int guarded(std::string* error, Work work) {
   try {
-    *output = demcal::smoothing::detail::train_batched(*batch, *options);
+    work();
     return 0;
   } catch (const std::exception& e) {
     *error = e.what();
@@ -176,15 +174,19 @@ extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_train(const demcal::smoothing::
   return 1;
 }
 
+}  // namespace
+
+// The plugin's C entry points (torch_plugin_abi.hpp).
+extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_plugin_abi() { return demcal::smoothing::detail::kTorchPluginAbi; }
+
+extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_train(const demcal::smoothing::detail::TrainingBatch* batch,
+                                                        const demcal::smoothing::SmootherOptions* options,
+                                                        demcal::smoothing::detail::TrainingOutput* output,
+                                                        std::string* error) {
+  return guarded(error, [&] { *output = demcal::smoothing::detail::train_batched(*batch, *options); });
+}
+
 extern "C" DEMCAL_PLUGIN_EXPORT int demcal_torch_train_regression(const demcal::smoothing::RegressionBatch* batch,
                                                                    std::vector<float>* parameters, std::string* error) {
-  try {
-    *parameters = demcal::smoothing::detail::train_regression(*batch);
-    return 0;
-  } catch (const std::exception& e) {
-    *error = e.what();
-  } catch (...) {
-    *error = "unknown exception";
-  }
-  return 1;
+  return guarded(error, [&] { *parameters = demcal::smoothing::detail::train_regression(*batch); });
 }

@@ -1,5 +1,5 @@
 #include "demcal/surrogate/curve_ensemble.hpp"
-#include "options_json.hpp"
+#include "internal.hpp"
 
 #include "demcal/smoothing/regression_ensemble.hpp"
 
@@ -10,19 +10,15 @@ namespace demcal::surrogate {
 
 namespace {
 
+// The next value of a splitmix64 stream.
 std::uint64_t splitmix(std::uint64_t& state) {
-  std::uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
+  const std::uint64_t value = detail::mix(state);
+  state += 0x9e3779b97f4a7c15ULL;
+  return value;
 }
 double uniform01(std::uint64_t& state) { return static_cast<double>(splitmix(state) >> 11) * 0x1.0p-53; }
 
-std::string fmt(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.17g", v);
-  return text;
-}
+std::string fmt(double v) { return detail::format_number(v); }
 
 nlohmann::json matrix_json(const Eigen::MatrixXd& m) {
   nlohmann::json rows = nlohmann::json::array();
@@ -44,10 +40,7 @@ Eigen::MatrixXd matrix_from(const nlohmann::json& j) {
   return m;
 }
 
-Eigen::VectorXd vector_from(const nlohmann::json& j) {
-  const auto v = j.get<std::vector<double>>();
-  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
-}
+using detail::vector_from;
 
 }  // namespace
 
@@ -180,13 +173,12 @@ nlohmann::json CurveEnsemble::to_json() const {
   for (const auto& net : members_) {
     nlohmann::json layers = nlohmann::json::array();
     for (size_t l = 0; l < net.weight.size(); ++l)
-      layers.push_back({{"weight", matrix_json(net.weight[l])},
-                        {"bias", std::vector<double>(net.bias[l].data(), net.bias[l].data() + net.bias[l].size())}});
+      layers.push_back({{"weight", matrix_json(net.weight[l])}, {"bias", detail::vector_json(net.bias[l])}});
     members.push_back(layers);
   }
   return {{"dimension", dimension_},
-          {"output_mean", std::vector<double>(mean_.data(), mean_.data() + mean_.size())},
-          {"output_scale", std::vector<double>(scale_.data(), scale_.data() + scale_.size())},
+          {"output_mean", detail::vector_json(mean_)},
+          {"output_scale", detail::vector_json(scale_)},
           {"members", members}};
 }
 

@@ -1,5 +1,5 @@
 #include "demcal/surrogate/gaussian_process.hpp"
-#include "options_json.hpp"
+#include "internal.hpp"
 
 #include <Eigen/Cholesky>
 #include <nlopt.h>
@@ -8,7 +8,6 @@
 #include <cmath>
 #include <limits>
 #include <random>
-#include <sstream>
 #include <stdexcept>
 #include <vector>
 
@@ -20,12 +19,7 @@ constexpr double kSqrt5 = 2.23606797749978969641;
 constexpr double kJitter = 1e-10;        // added to the diagonal on top of the nugget
 constexpr double kMinSignal = 1e-2, kMaxSignal = 1e2;  // standardised signal variance bounds
 
-std::string fmt(double v) {
-  std::ostringstream out;
-  out.precision(17);
-  out << v;
-  return out.str();
-}
+std::string fmt(double v) { return detail::format_number(v); }
 
 double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 

@@ -1,5 +1,5 @@
 #include "demcal/surrogate/surrogate.hpp"
-#include "options_json.hpp"
+#include "internal.hpp"
 
 #include <nlopt.h>
 
@@ -7,7 +7,6 @@
 #include <cmath>
 #include <numeric>
 #include <random>
-#include <sstream>
 #include <stdexcept>
 
 namespace demcal::surrogate {
@@ -16,30 +15,10 @@ namespace {
 
 double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 
-std::uint64_t mix(std::uint64_t z) {
-  z += 0x9e3779b97f4a7c15ULL;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
-
-std::string fmt(double v) {
-  std::ostringstream out;
-  out.precision(17);
-  out << v;
-  return out.str();
-}
-
-nlohmann::json vector_json(const Eigen::VectorXd& v) {
-  nlohmann::json a = nlohmann::json::array();
-  for (Eigen::Index i = 0; i < v.size(); ++i) a.push_back(v[i]);
-  return a;
-}
-
-Eigen::VectorXd vector_from(const nlohmann::json& j) {
-  const auto v = j.get<std::vector<double>>();
-  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
-}
+using detail::mix;
+using detail::vector_from;
+using detail::vector_json;
+std::string fmt(double v) { return detail::format_number(v); }
 
 void split_rows(const std::vector<TrainingRow>& rows, Eigen::MatrixXd& X, Eigen::VectorXd& y) {
   long finite = 0;
@@ -244,13 +223,7 @@ bool SurrogateModel::fit(const std::vector<TrainingRow>& all_rows) {
     const Eigen::ArrayXd targets = mlp_log_ ? Eigen::ArrayXd(y.array().log()) : Eigen::ArrayXd(y.array());
     mlp_prior_sd_ = std::sqrt((targets - targets.mean()).square().mean());
     if (!(mlp_prior_sd_ > 0)) mlp_prior_sd_ = 1.0;  // equal targets: no scale to cap at
-    double squares = 0;
-    for (Eigen::Index i = 0; i < X.rows(); ++i) {
-      const double residual = predict(X.row(i).transpose()).mean - (mlp_log_ ? std::log(y[i]) : y[i]);
-      squares += residual * residual;
-    }
-    mlp_noise_sd_ = std::sqrt(squares / static_cast<double>(X.rows()));
-    set_incumbent(rows);
+    mlp_noise_sd_ = set_incumbent(rows);
     return true;
   }
   Eigen::MatrixXd X;
@@ -281,19 +254,25 @@ bool SurrogateModel::condition(const std::vector<TrainingRow>& all_rows) {
 }
 
 // Incumbent of EI: the smallest predicted mean at a training point (robust to the noise); spread:
-// the range of the model-space targets (LCB's failure penalty).
-void SurrogateModel::set_incumbent(const std::vector<TrainingRow>& rows) {
+// the range of the model-space targets (LCB's failure penalty). Returns the RMS of the residuals
+// of the predicted mean at those points (model space).
+double SurrogateModel::set_incumbent(const std::vector<TrainingRow>& rows) {
   incumbent_ = HUGE_VAL;
-  double lo = HUGE_VAL, hi = -HUGE_VAL;
+  double lo = HUGE_VAL, hi = -HUGE_VAL, squares = 0;
+  long points = 0;
   const bool log = log_transformed();
   for (const auto& r : rows) {
     if (!std::isfinite(r.fitness) || (options_.kind == "mlp" && r.outputs.size() == 0)) continue;
-    incumbent_ = std::min(incumbent_, predict(r.unit).mean);
+    const double mean = predict(r.unit).mean;
     const double v = log ? std::log(r.fitness) : r.fitness;
+    incumbent_ = std::min(incumbent_, mean);
     lo = std::min(lo, v);
     hi = std::max(hi, v);
+    squares += (mean - v) * (mean - v);
+    ++points;
   }
   spread_ = hi > lo ? hi - lo : 1.0;
+  return points > 0 ? std::sqrt(squares / static_cast<double>(points)) : 0.0;
 }
 
 int SurrogateModel::dimension() const {
@@ -607,6 +586,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     try {
       told_x_.clear();
       told_f_.clear();
+      told_outputs_.clear();
       pending_units_.clear();
       for (const auto& u : state.at("told_x")) told_x_.push_back(vector_from(u));
       for (const auto& v : state.at("told_f"))
@@ -625,10 +605,12 @@ class BayesOptimiser final : public optimise::Optimiser {
  private:
   Eigen::VectorXd propose() {
     const int d = space_.dimension();
+    // A told point's curves are read once (its archived runs do not change).
+    const bool curves = surrogate_.kind == "mlp" && hooks_.outputs_at;
+    while (told_outputs_.size() < told_x_.size())
+      told_outputs_.push_back(curves ? hooks_.outputs_at(told_x_[told_outputs_.size()]) : Eigen::VectorXd());
     std::vector<TrainingRow> rows = warm_;
-    for (size_t i = 0; i < told_x_.size(); ++i)
-      rows.push_back({told_x_[i], told_f_[i],
-                      surrogate_.kind == "mlp" && hooks_.outputs_at ? hooks_.outputs_at(told_x_[i]) : Eigen::VectorXd()});
+    for (size_t i = 0; i < told_x_.size(); ++i) rows.push_back({told_x_[i], told_f_[i], told_outputs_[i]});
     std::mt19937_64 rng(mix(mix(options_.seed) ^ static_cast<std::uint64_t>(iteration_ + 1)));
     model_ = SurrogateModel(surrogate_, hooks_);
     Eigen::VectorXd random_point(d);
@@ -690,6 +672,7 @@ class BayesOptimiser final : public optimise::Optimiser {
   Eigen::MatrixXd design_;
   std::vector<Eigen::VectorXd> told_x_;
   std::vector<double> told_f_;
+  std::vector<Eigen::VectorXd> told_outputs_;  // the "mlp" kind's curves of told_x_, read once
   std::vector<Eigen::VectorXd> pending_units_;
   bool pending_ = false;
   SurrogateModel model_;

@@ -160,6 +160,10 @@ CampaignConfig campaign_from_json(const nlohmann::json& json, const std::string&
                                   const std::string& source);
 CampaignConfig load_campaign(const std::string& path);
 
+// The "kind" of a surrogate model file (demcal surrogate train); "" when the file cannot be read as
+// one (the campaign reports that when it loads the model). A campaign given a model takes its kind.
+std::string surrogate_model_kind(const std::string& path);
+
 // The "mlp" surrogate's curve grid of each case (surrogate_data.hpp), beside the case's objective
 // key (which measurement, objective and smoother its archived fitness rows belong to). Loads and,
 // for objective 2, smooths the measurements. Throws CampaignError naming the file at fault.

@@ -63,7 +63,7 @@ struct ArchivedCase {
   std::string model_hash;
   std::string objective_key;
   double weight = 1;
-  std::shared_ptr<const CurveGrid> grid;
+  std::shared_ptr<const CurveGrid> grid = nullptr;
 };
 
 // The outputs of one parameter set's runs (run_ids: one per case, in case order), concatenated;

@@ -162,7 +162,7 @@ class SurrogateModel {
   static SurrogateModel from_json(const nlohmann::json& json, const std::string& where);
 
  private:
-  void set_incumbent(const std::vector<TrainingRow>& rows);
+  double set_incumbent(const std::vector<TrainingRow>& rows);
   SurrogateOptions options_;
   CurveHooks hooks_;
   GaussianProcess gp_;

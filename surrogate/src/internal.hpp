@@ -1,12 +1,42 @@
-// Private to the surrogate module: reading an options struct from its JSON object.
+// Private to the surrogate module: what its sources share (number text, JSON of vectors, the
+// splitmix64 mixer, reading an options struct).
 #pragma once
 
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
+#include <sstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace demcal::surrogate::detail {
+
+// A double as text that reads back to the same value (error messages).
+inline std::string format_number(double v) {
+  std::ostringstream out;
+  out.precision(17);
+  out << v;
+  return out.str();
+}
+
+inline nlohmann::json vector_json(const Eigen::VectorXd& v) {
+  return std::vector<double>(v.data(), v.data() + v.size());
+}
+
+inline Eigen::VectorXd vector_from(const nlohmann::json& j) {
+  const auto v = j.get<std::vector<double>>();
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+}
+
+// splitmix64's finaliser of z + the golden-ratio increment: seeds derived from seeds.
+inline std::uint64_t mix(std::uint64_t z) {
+  z += 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
 
 // Reads `json` key by key with set(options, key, value), which assigns one key and throws for an
 // unknown one; errors name `where`, the key and its value (a nested object's reader names its own
