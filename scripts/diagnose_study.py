@@ -6,7 +6,7 @@ well its parameters came back, and how far the error fell.
 
 usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
-                         [--candidate-simulations 80] [--surrogate-kind gp] [--jobs 1]
+                         [--candidate-simulations 80] [--surrogate-kind mlp] [--jobs 1]
 
 Each case and seed gets OUT_DIR/<case>/seed-<s>/ (measured.csv, campaign.json, the diagnosis in
 diag/). A finished diagnosis (diag/diagnosis.json) is read, not run again, so the study resumes.
@@ -76,7 +76,8 @@ def run_one(binary, args, case, seed):
         with open(os.path.join(folder, "diagnose.log"), "w") as log:
             subprocess.run([binary, "diagnose", os.path.join(folder, "campaign.json"), "--out",
                             os.path.join(folder, "diag"), "--effects", args.effects, "--candidate-simulations",
-                            str(args.candidate_simulations), "--surrogate-kind", args.surrogate_kind, "--no-report"],
+                            str(args.candidate_simulations), "--no-report",
+                            *(["--surrogate-kind", args.surrogate_kind] if args.surrogate_kind else [])],
                            check=True, stdout=log, stderr=subprocess.STDOUT)
     with open(result) as f:
         return json.load(f)
@@ -129,7 +130,7 @@ def main():
     p.add_argument("--max-displacement", type=float, default=0.008)
     p.add_argument("--candidate-simulations", type=int, default=80)
     p.add_argument("--effects", default="all", help="effects the diagnosis considers")
-    p.add_argument("--surrogate-kind", default="gp", help="the searches' surrogate (gp | mlp)")
+    p.add_argument("--surrogate-kind", default="", help="the searches' surrogate (gp | mlp; default: demcal's)")
     p.add_argument("--jobs", type=int, default=1)
     args = p.parse_args()
     binary = os.path.abspath(args.binary)

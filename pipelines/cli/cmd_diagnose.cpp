@@ -11,20 +11,13 @@
 
 namespace {
 
+// The options' defaults are DiagnoseOptions' own; the text flags are split into names in run().
 struct DiagnoseFlags {
+  demcal::pipelines::DiagnoseOptions options;
   std::string campaign_file;
-  std::string out = "diagnosis";
   std::string effects = "all";
   std::string held_out;
-  std::string result;
-  long max_simulations = 0;
-  int candidates = 3;
-  int candidate_simulations = 0;
-  int scatter_runs = 2;
-  double evidence = 10;
-  std::string candidate_algorithm = "bo";
-  std::string surrogate_kind = "gp";
-  bool resume = false, no_report = false, quiet = false;
+  bool no_report = false, quiet = false;
 };
 
 // Names separated by commas; "all" or "" = none (every effect, for --effects).
@@ -40,49 +33,42 @@ std::vector<std::string> split_names(const std::string& text) {
 void run(const DiagnoseFlags& f) {
   using namespace demcal::pipelines;
   const CampaignConfig config = load_campaign(f.campaign_file);
-  DiagnoseOptions o;
-  o.output = f.out;
+  DiagnoseOptions o = f.options;
   o.effects = split_names(f.effects);
   o.held_out_cases = split_names(f.held_out);
-  o.base_result = f.result;
-  o.max_simulations = f.max_simulations;
-  o.max_candidates = f.candidates;
-  o.candidate_evaluations = f.candidate_simulations;
-  o.evidence_threshold = f.evidence;
-  o.scatter_runs = f.scatter_runs;
-  o.candidate_algorithm = f.candidate_algorithm;
-  o.surrogate_kind = f.surrogate_kind;
-  o.resume = f.resume;
   o.report = !f.no_report;
   o.progress = !f.quiet;
   const Diagnosis d = run_diagnosis(config, o);
   std::cout << d.verdict << "\n";
   std::cout << "error before " << d.error_before << " N, after " << d.error_after << " N; " << d.simulations
             << " simulations\n";
-  std::cout << "diagnosis: " << f.out << "/diagnosis.json\n";
+  std::cout << "diagnosis: " << o.output << "/diagnosis.json\n";
 }
 
 void setup(CLI::App& app) {
   auto flags = std::make_shared<DiagnoseFlags>();
   auto* sub = app.add_subcommand("diagnose", "Trace a calibration's residual to the physical effect the model lacks");
   sub->add_option("campaign", flags->campaign_file, "Campaign JSON file (as for calibrate)")->required()->check(CLI::ExistingFile);
-  sub->add_option("--out", flags->out, "Output folder (diagnosis.json, report.md, base/, candidates/)");
+  auto& o = flags->options;
+  sub->add_option("--out", o.output, "Output folder (diagnosis.json, report.md, base/, candidates/)");
   sub->add_option("--effects", flags->effects, "all, or effect names separated by commas (joint-closure,friction-softening,...)");
-  sub->add_option("--result", flags->result, "Reuse a finished base calibration (its folder or result.json)");
+  sub->add_option("--result", o.base_result, "Reuse a finished base calibration (its folder or result.json)");
   sub->add_option("--held-out", flags->held_out,
                   "Cases of the campaign, separated by commas, left out of every fit and used to check the fits");
-  sub->add_option("--max-simulations", flags->max_simulations, "Budget of the whole diagnosis (0 = the campaign's per calibration)");
-  sub->add_option("--candidates", flags->candidates, "Effects calibrated at most, best signature first");
-  sub->add_option("--candidate-simulations", flags->candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");
-  sub->add_option("--candidate-algorithm", flags->candidate_algorithm,
+  sub->add_option("--held-out-ratio", o.held_out_reproduced_ratio,
+                  "Held-out channels check the fits where the base fit's RMS is at most this many times their noise")->capture_default_str();
+  sub->add_option("--max-simulations", o.max_simulations, "Budget of the whole diagnosis (0 = the campaign's per calibration)");
+  sub->add_option("--candidates", o.max_candidates, "Effects calibrated at most, best signature first")->capture_default_str();
+  sub->add_option("--candidate-simulations", o.candidate_evaluations, "Simulations per candidate calibration (0 = the campaign's)");
+  sub->add_option("--candidate-algorithm", o.candidate_algorithm,
                   "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
-  sub->add_option("--surrogate-kind", flags->surrogate_kind,
-                  "Surrogate of the refinement's and candidates' searches: gp (default, as measured) | mlp")
+  sub->add_option("--surrogate-kind", o.surrogate_kind, "Surrogate of the refinement's and candidates' searches: gp | mlp")
+      ->capture_default_str()
       ->check(CLI::IsMember({"gp", "mlp"}));
-  sub->add_option("--evidence", flags->evidence, "Criterion fall needed to accept an effect");
-  sub->add_option("--scatter-runs", flags->scatter_runs,
-                  "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)");
-  sub->add_flag("--resume", flags->resume, "Continue interrupted calibrations from their archives");
+  sub->add_option("--evidence", o.evidence_threshold, "Criterion fall needed to accept an effect")->capture_default_str();
+  sub->add_option("--scatter-runs", o.scatter_runs,
+                  "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)")->capture_default_str();
+  sub->add_flag("--resume", o.resume, "Continue interrupted calibrations from their archives");
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");
   sub->add_flag("--quiet", flags->quiet, "No progress lines");
   sub->callback([flags] { run(*flags); });

@@ -34,6 +34,8 @@ void DiagnoseOptions::Validate() const {
   if (scatter_runs < 0) fail("scatter_runs", std::to_string(scatter_runs), "must be >= 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
   if (!(held_out_tolerance >= 0)) fail("held_out_tolerance", std::to_string(held_out_tolerance), "must be >= 0");
+  if (!(held_out_reproduced_ratio >= 1))
+    fail("held_out_reproduced_ratio", std::to_string(held_out_reproduced_ratio), "must be >= 1");
   if (candidate_algorithm.empty()) fail("candidate_algorithm", "\"\"", "must name an optimiser");
   if (surrogate_kind != "gp" && surrogate_kind != "mlp") fail("surrogate_kind", "\"" + surrogate_kind + "\"", "must be gp or mlp");
   if (!(candidate_initial_step > 0 && candidate_initial_step <= 0.5))
@@ -551,11 +553,11 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
       c.verdict = "rejected";
       if (c.reason.empty()) c.reason = "no usable fit";
     } else if (c.score < -options.evidence_threshold && c.error < d.error_before) {
-      if (spoils_held_out_data(c, d, options)) {
+      if (const HeldOutCheck check = check_held_out(c, d, options); check.spoils) {
         c.verdict = "rejected";
         c.reason = "fits the calibrated curves (criterion change " + format_number(c.score) +
-                   ") but spoils the data it was not fitted to: held-out error " + format_number(d.held_out_error) +
-                   " -> " + format_number(c.held_out_error) + " N";
+                   ") but spoils the data it was not fitted to, which the base fit reproduces: error there " +
+                   format_number(check.base_error) + " -> " + format_number(check.candidate_error) + " N";
       } else {
         accepted.push_back(&c);
       }
@@ -622,11 +624,35 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   return r;
 }
 
-bool spoils_held_out_data(const EffectCandidate& c, const Diagnosis& d, const DiagnoseOptions& options) {
-  if (!std::isfinite(d.held_out_error)) return false;  // no held-out data
-  if (!std::isfinite(c.held_out_error)) return true;   // the fit no longer reaches it
-  return c.held_out_error >
-         d.held_out_error + std::max(overall(d.held_out_noise), options.held_out_tolerance * d.held_out_error);
+std::vector<std::string> held_out_checks(const Diagnosis& d, const DiagnoseOptions& options) {
+  std::vector<std::string> keys;
+  for (const auto& [key, rms] : d.held_out_rms) {
+    const auto noise = d.held_out_noise.find(key);
+    if (noise != d.held_out_noise.end() && std::isfinite(noise->second) &&
+        rms <= options.held_out_reproduced_ratio * noise->second)
+      keys.push_back(key);
+  }
+  return keys;
+}
+
+HeldOutCheck check_held_out(const EffectCandidate& c, const Diagnosis& d, const DiagnoseOptions& options) {
+  HeldOutCheck check;
+  double base = 0, candidate = 0, noise = 0;
+  bool reached = true;
+  for (const auto& key : held_out_checks(d, options)) {
+    ++check.channels;
+    base += d.held_out_rms.at(key) * d.held_out_rms.at(key);
+    noise += d.held_out_noise.at(key) * d.held_out_noise.at(key);
+    const auto found = c.held_out_rms.find(key);
+    if (found == c.held_out_rms.end() || !std::isfinite(found->second)) reached = false;
+    else candidate += found->second * found->second;
+  }
+  if (check.channels == 0) return check;
+  check.base_error = std::sqrt(base / check.channels);
+  check.candidate_error = reached ? std::sqrt(candidate / check.channels) : Diagnosis::kNaN;
+  check.spoils = !reached || check.candidate_error > check.base_error +
+                                 std::max(std::sqrt(noise / check.channels), options.held_out_tolerance * check.base_error);
+  return check;
 }
 
 Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& options) {
@@ -684,6 +710,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     d.held_out_noise[key_of(c)] = c.noise;
   }
   d.held_out_error = base.held_out_error;
+  d.held_out_checked = held_out_checks(d, options);
   const double noise = overall_noise(base.residuals);
   // Scatter, sensitivities and signatures compare fitted curves only: held-out cases are not simulated for them.
   const CampaignConfig fitted = fitted_cases(config, options);
@@ -869,7 +896,7 @@ json Diagnosis::to_json() const {
           {"error_before", finite_or_null(error_before)},
           {"error_after", finite_or_null(error_after)},
           {"held_out", {{"rms", params_json(held_out_rms)}, {"noise", params_json(held_out_noise)},
-                        {"error", finite_or_null(held_out_error)}}},
+                        {"error", finite_or_null(held_out_error)}, {"checks", held_out_checked}}},
           {"simulations", simulations},
           {"wall_time_s", wall_time_s}};
 }

@@ -3,6 +3,7 @@
 #include "demcal/pipelines/diagnose.hpp"
 #include "demcal/pipelines/report.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -110,10 +111,16 @@ void write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) 
        << " | " << c.verdict << " | " << c.reason << " |\n";
   md << "\n";
   if (!d.held_out_rms.empty()) {
-    md << "Data not fitted (channels of weight 0, held-out cases), a check of every fit; the base fit's RMS "
-          "error there:\n\n| case / channel | RMS (N) | noise (N) |\n|---|---|---|\n";
-    for (const auto& [key, rms] : d.held_out_rms)
-      md << "| " << key << " | " << num(rms) << " | " << num(d.held_out_noise.at(key)) << " |\n";
+    md << "Data not fitted (channels of weight 0, held-out cases) and the base fit's RMS error there. A channel "
+          "checks the fits only where the base fit reproduces it (RMS at most "
+       << num(options.held_out_reproduced_ratio, 2)
+       << " x its noise); one the base fit misses is reported, not judged:\n\n"
+          "| case / channel | RMS (N) | noise (N) | checks the fits |\n|---|---|---|---|\n";
+    for (const auto& [key, rms] : d.held_out_rms) {
+      const bool checks = std::find(d.held_out_checked.begin(), d.held_out_checked.end(), key) != d.held_out_checked.end();
+      md << "| " << key << " | " << num(rms) << " | " << num(d.held_out_noise.at(key)) << " | " << (checks ? "yes" : "no")
+         << " |\n";
+    }
     md << "\n";
   } else {
     md << "No data was left out of the fits (no channel of weight 0, no `--held-out` case): the fits are not "
