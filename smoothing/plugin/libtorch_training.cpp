@@ -15,10 +15,46 @@ namespace demcal::smoothing::detail {
 
 namespace {
 
+// Sets LibTorch's intra-op threads for one training and restores the previous count after it.
+class TrainingThreads {
+ public:
+  explicit TrainingThreads(int threads) : previous_(torch::get_num_threads()) { torch::set_num_threads(threads); }
+  ~TrainingThreads() { torch::set_num_threads(previous_); }
+  TrainingThreads(const TrainingThreads&) = delete;
+  TrainingThreads& operator=(const TrainingThreads&) = delete;
+
+ private:
+  int previous_;
+};
+
+// Backpropagation through a batch of tanh networks: from delta = d(loss)/d(output), the input of
+// every layer (`activation`) and the transposed weights, the gradient of each network in the flat
+// layout W0, b0, W1, b1, ... (one row per network; `grads` is scratch of 2 x layers tensors).
+torch::Tensor backpropagate(torch::Tensor delta, const std::vector<torch::Tensor>& activation,
+                            const std::vector<torch::Tensor>& weight_t, std::vector<torch::Tensor>& grads,
+                            std::int64_t networks) {
+  for (std::size_t l = activation.size(); l-- > 0;) {
+    grads[2 * l] = torch::bmm(activation[l].transpose(1, 2), delta).view({networks, -1});
+    grads[2 * l + 1] = delta.sum(1);
+    if (l > 0) {
+      const torch::Tensor& h = activation[l];
+      delta = torch::bmm(delta, weight_t[l]).mul_(1 - h * h);
+    }
+  }
+  return torch::cat(grads, 1);
+}
+
+// Adam's moment update with gradient g at step t (from 1); returns the bias-corrected denominator
+// sqrt(v / (1 - beta2^t)) + epsilon of the parameter update.
+torch::Tensor adam_moments(torch::Tensor& m, torch::Tensor& v, const torch::Tensor& g, double t) {
+  m.mul_(kAdamBeta1).add_(g, 1 - kAdamBeta1);
+  v.mul_(kAdamBeta2).addcmul_(g, g, 1 - kAdamBeta2);
+  return (v / (1 - std::pow(kAdamBeta2, t))).sqrt_().add_(kAdamEpsilon);
+}
+
 TrainingOutput train_batched(const TrainingBatch& tb, const SmootherOptions& options) {
   torch::NoGradGuard no_grad;
-  const int previous_threads = torch::get_num_threads();
-  torch::set_num_threads(options.threads);
+  TrainingThreads threads(options.threads);
 
   const std::int64_t batch = tb.curves, n = tb.points, total = tb.parameter_count;
   const auto f32 = torch::TensorOptions().dtype(torch::kFloat32);
@@ -65,27 +101,13 @@ TrainingOutput train_batched(const TrainingBatch& tb, const SmootherOptions& opt
     torch::Tensor output = forward();
     if (selector.due(epoch)) offer(epoch, output);
     // d(mean |y - t|)/dy per curve: the loss is summed over curves, so each network sees only its own.
-    torch::Tensor delta = (output - target).sign_().mul_(inv_n);
-    for (std::size_t l = layers; l-- > 0;) {
-      grads[2 * l] = torch::bmm(activation[l].transpose(1, 2), delta).view({batch, -1});
-      grads[2 * l + 1] = delta.sum(1);
-      if (l > 0) {
-        const torch::Tensor& h = activation[l];
-        delta = torch::bmm(delta, weight_t[l]).mul_(1 - h * h);
-      }
-    }
-    torch::Tensor g = torch::cat(grads, 1);  // the flat layout W0, b0, W1, b1, ...
+    const torch::Tensor g = backpropagate((output - target).sign_().mul_(inv_n), activation, weight_t, grads, batch);
     const double t = epoch + 1;
-    const double correction1 = 1 - std::pow(kAdamBeta1, t);
-    const double correction2 = 1 - std::pow(kAdamBeta2, t);
-    adam_m.mul_(kAdamBeta1).add_(g, 1 - kAdamBeta1);
-    adam_v.mul_(kAdamBeta2).addcmul_(g, g, 1 - kAdamBeta2);
-    torch::Tensor denom = (adam_v / correction2).sqrt_().add_(kAdamEpsilon);
-    params.addcdiv_(adam_m, denom, -learning_rate_at(options, epoch) / correction1);
+    const torch::Tensor denom = adam_moments(adam_m, adam_v, g, t);
+    params.addcdiv_(adam_m, denom, -learning_rate_at(options, epoch) / (1 - std::pow(kAdamBeta1, t)));
   }
 
   offer(options.epochs, forward());
-  torch::set_num_threads(previous_threads);
   return selector.result();
 }
 
@@ -93,8 +115,7 @@ TrainingOutput train_batched(const TrainingBatch& tb, const SmootherOptions& opt
 // backpropagation, with every member seeing all rows through its own row weights.
 std::vector<float> train_regression(const RegressionBatch& rb) {
   torch::NoGradGuard no_grad;
-  const int previous_threads = torch::get_num_threads();
-  torch::set_num_threads(rb.threads);
+  TrainingThreads threads(rb.threads);
 
   const std::int64_t members = rb.members, n = rb.rows;
   const std::int64_t total = regression_parameter_count(rb.inputs, rb.outputs, rb.hidden_layers, rb.hidden_width);
@@ -130,26 +151,14 @@ std::vector<float> train_regression(const RegressionBatch& rb) {
       torch::Tensor z = torch::baddbmm(bias[l], h, weight[l]);
       h = l + 1 < layers ? z.tanh_() : z;
     }
-    torch::Tensor delta = (h - target).mul_(scale);
-    for (std::size_t l = layers; l-- > 0;) {
-      grads[2 * l] = torch::bmm(activation[l].transpose(1, 2), delta).view({members, -1});
-      grads[2 * l + 1] = delta.sum(1);
-      if (l > 0) {
-        const torch::Tensor& a = activation[l];
-        delta = torch::bmm(delta, weight_t[l]).mul_(1 - a * a);
-      }
-    }
-    torch::Tensor g = torch::cat(grads, 1);
+    const torch::Tensor g = backpropagate((h - target).mul_(scale), activation, weight_t, grads, members);
     const double progress = rb.epochs > 1 ? static_cast<double>(epoch) / (rb.epochs - 1) : 1.0;
     const double lr = rb.final_learning_rate +
                       0.5 * (rb.learning_rate - rb.final_learning_rate) * (1 + std::cos(M_PI * progress));
     const double t = epoch + 1;
-    adam_m.mul_(kAdamBeta1).add_(g, 1 - kAdamBeta1);
-    adam_v.mul_(kAdamBeta2).addcmul_(g, g, 1 - kAdamBeta2);
-    torch::Tensor denom = (adam_v / (1 - std::pow(kAdamBeta2, t))).sqrt_().add_(kAdamEpsilon);
+    const torch::Tensor denom = adam_moments(adam_m, adam_v, g, t);
     params.mul_(1 - lr * rb.weight_decay).addcdiv_(adam_m, denom, -lr / (1 - std::pow(kAdamBeta1, t)));
   }
-  torch::set_num_threads(previous_threads);
   const torch::Tensor result = params.contiguous();
   return std::vector<float>(result.data_ptr<float>(), result.data_ptr<float>() + members * total);
 }

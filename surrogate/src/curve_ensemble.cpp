@@ -18,7 +18,7 @@ std::uint64_t splitmix(std::uint64_t& state) {
 }
 double uniform01(std::uint64_t& state) { return static_cast<double>(splitmix(state) >> 11) * 0x1.0p-53; }
 
-std::string fmt(double v) { return detail::format_number(v); }
+using detail::format_number;
 
 nlohmann::json matrix_json(const Eigen::MatrixXd& m) {
   nlohmann::json rows = nlohmann::json::array();
@@ -50,10 +50,10 @@ void MlpOptions::Validate() const {
   if (hidden_layers < 1) fail("hidden_layers = " + std::to_string(hidden_layers) + " must be >= 1");
   if (hidden_width < 1) fail("hidden_width = " + std::to_string(hidden_width) + " must be >= 1");
   if (epochs < 1) fail("epochs = " + std::to_string(epochs) + " must be >= 1");
-  if (!(learning_rate > 0) || !std::isfinite(learning_rate)) fail("learning_rate = " + fmt(learning_rate) + " must be > 0");
+  if (!(learning_rate > 0) || !std::isfinite(learning_rate)) fail("learning_rate = " + format_number(learning_rate) + " must be > 0");
   if (!(final_learning_rate > 0) || final_learning_rate > learning_rate)
-    fail("final_learning_rate = " + fmt(final_learning_rate) + " must be in (0, learning_rate]");
-  if (!(weight_decay >= 0) || !std::isfinite(weight_decay)) fail("weight_decay = " + fmt(weight_decay) + " must be >= 0");
+    fail("final_learning_rate = " + format_number(final_learning_rate) + " must be in (0, learning_rate]");
+  if (!(weight_decay >= 0) || !std::isfinite(weight_decay)) fail("weight_decay = " + format_number(weight_decay) + " must be >= 0");
 }
 
 nlohmann::json MlpOptions::to_json() const {

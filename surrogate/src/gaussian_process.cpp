@@ -19,7 +19,7 @@ constexpr double kSqrt5 = 2.23606797749978969641;
 constexpr double kJitter = 1e-10;        // added to the diagonal on top of the nugget
 constexpr double kMinSignal = 1e-2, kMaxSignal = 1e2;  // standardised signal variance bounds
 
-std::string fmt(double v) { return detail::format_number(v); }
+using detail::format_number;
 
 double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 
@@ -159,10 +159,10 @@ void GpOptions::Validate() const {
   if (max_iterations < 10)
     throw std::invalid_argument("gp option max_iterations = " + std::to_string(max_iterations) + " must be >= 10");
   if (!(min_length > 0) || !(max_length > min_length) || !std::isfinite(max_length))
-    throw std::invalid_argument("gp options min_length = " + fmt(min_length) + ", max_length = " + fmt(max_length) +
+    throw std::invalid_argument("gp options min_length = " + format_number(min_length) + ", max_length = " + format_number(max_length) +
                                 " must satisfy 0 < min_length < max_length");
   if (!(min_noise > 0) || !(max_noise > min_noise) || !std::isfinite(max_noise))
-    throw std::invalid_argument("gp options min_noise = " + fmt(min_noise) + ", max_noise = " + fmt(max_noise) +
+    throw std::invalid_argument("gp options min_noise = " + format_number(min_noise) + ", max_noise = " + format_number(max_noise) +
                                 " must satisfy 0 < min_noise < max_noise");
 }
 
@@ -267,7 +267,7 @@ void GaussianProcess::condition(const Eigen::MatrixXd& X, const Eigen::VectorXd&
   if (X.rows() != y.size()) throw std::invalid_argument("gaussian process: X and y sizes differ");
   for (Eigen::Index i = 0; i < y.size(); ++i)
     if (!std::isfinite(y[i]) || (log_ && !(y[i] > 0)))
-      throw std::invalid_argument("gaussian process: training value " + fmt(y[i]) + " is not usable" +
+      throw std::invalid_argument("gaussian process: training value " + format_number(y[i]) + " is not usable" +
                                   (log_ ? " by a log-transformed model" : ""));
   X_ = X;
   y_ = y;
@@ -406,7 +406,7 @@ double matern52(const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen:
 double normal_pdf(double u) { return std::exp(-0.5 * u * u) / std::sqrt(2.0 * M_PI); }
 double normal_cdf(double u) { return 0.5 * std::erfc(-u / std::sqrt(2.0)); }
 double normal_quantile(double p) {
-  if (!(p > 0 && p < 1)) throw std::invalid_argument("normal_quantile: p = " + fmt(p) + " must lie in (0, 1)");
+  if (!(p > 0 && p < 1)) throw std::invalid_argument("normal_quantile: p = " + format_number(p) + " must lie in (0, 1)");
   double lo = -40, hi = 40;
   for (int i = 0; i < 200 && hi - lo > 1e-14; ++i) {
     const double mid = 0.5 * (lo + hi);

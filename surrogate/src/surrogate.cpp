@@ -18,7 +18,7 @@ double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11)
 using detail::mix;
 using detail::vector_from;
 using detail::vector_json;
-std::string fmt(double v) { return detail::format_number(v); }
+using detail::format_number;
 
 void split_rows(const std::vector<TrainingRow>& rows, Eigen::MatrixXd& X, Eigen::VectorXd& y) {
   long finite = 0;
@@ -125,7 +125,7 @@ void SurrogateOptions::Validate() const {
   if (pool_factor < 1) throw std::invalid_argument("surrogate pool_factor = " + std::to_string(pool_factor) + " must be >= 1");
   if (k < 0) throw std::invalid_argument("surrogate k = " + std::to_string(k) + " must be >= 0 (0 = the whole batch)");
   if (!(lcb_kappa >= 0) || !std::isfinite(lcb_kappa))
-    throw std::invalid_argument("surrogate lcb_kappa = " + fmt(lcb_kappa) + " must be finite and >= 0");
+    throw std::invalid_argument("surrogate lcb_kappa = " + format_number(lcb_kappa) + " must be finite and >= 0");
   if (min_runs < 3) throw std::invalid_argument("surrogate min_runs = " + std::to_string(min_runs) + " must be >= 3");
   if (max_training_runs < 10)
     throw std::invalid_argument("surrogate max_training_runs = " + std::to_string(max_training_runs) + " must be >= 10");
