@@ -609,7 +609,8 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
     d.error_after = d.error_before;
     d.verdict = "No effect needed: none of the candidate effects explains the residual better than its extra "
                 "parameters cost (RMS force error " + format_number(d.error_before) + " N, noise about " +
-                format_number(noise) + " N, simulation scatter about " + format_number(overall(d.scatter)) + " N).";
+                format_number(noise) + " N, simulation scatter about " + format_number(overall(d.scatter)) + " N)." +
+                unfitted_data_note(d);
   }
 }
 
@@ -622,6 +623,22 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   for (std::size_t i = 0; i < r.displacement.size(); ++i) r.simulated[i] = smoothing::interpolate(envelope, r.displacement[i]);
   complete_residual(r);
   return r;
+}
+
+std::string unfitted_data_note(const Diagnosis& d) {
+  std::string missed;
+  for (const auto& [key, rms] : d.held_out_rms) {
+    if (std::find(d.held_out_checked.begin(), d.held_out_checked.end(), key) != d.held_out_checked.end()) continue;
+    const auto noise = d.held_out_noise.find(key);
+    missed += (missed.empty() ? "" : ", ") + key + " (RMS " + format_number(rms) + " N";
+    if (noise != d.held_out_noise.end() && std::isfinite(noise->second) && noise->second > 0)
+      missed += ", " + format_number(rms / noise->second, 2) + " x its noise";
+    missed += ")";
+  }
+  if (missed.empty()) return "";
+  return " But the base fit misses data it was not fitted to: " + missed +
+         ". An effect may show only there; to let the diagnosis use that data, fit it (a channel weight above 0, "
+         "or the case left out of --held-out).";
 }
 
 std::vector<std::string> held_out_checks(const Diagnosis& d, const DiagnoseOptions& options) {
@@ -844,7 +861,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     d.error_after = d.error_before;
     d.verdict = "No effect needed: the base fit is already within the measurement noise and the simulation's own "
                 "scatter (RMS force error " + format_number(d.error_before) + " N; noise about " + format_number(noise) +
-                " N, scatter of the simulated curve about " + format_number(scatter) + " N).";
+                " N, scatter of the simulated curve about " + format_number(scatter) + " N)." + unfitted_data_note(d);
   } else {
     select(d, options);
   }

@@ -160,6 +160,19 @@ TEST(Evidence, HeldOutDataVetoesAFitThatSpoilsIt) {
   EXPECT_THROW(o.Validate(), CampaignError);
 }
 
+TEST(Evidence, ANoEffectVerdictNamesHeldOutDataTheBaseFitMisses) {
+  Diagnosis d;
+  EXPECT_EQ(unfitted_data_note(d), "");  // no held-out data
+  d.held_out_rms = {{"main/abutment_horizontal", 290}, {"check/load_vertical", 60}};
+  d.held_out_noise = {{"main/abutment_horizontal", 89}, {"check/load_vertical", 58}};
+  d.held_out_checked = {"check/load_vertical", "main/abutment_horizontal"};
+  EXPECT_EQ(unfitted_data_note(d), "");  // every channel reproduced
+  d.held_out_checked = {"check/load_vertical"};
+  const std::string note = unfitted_data_note(d);
+  EXPECT_NE(note.find("main/abutment_horizontal (RMS 290 N, 3.3 x its noise)"), std::string::npos) << note;
+  EXPECT_EQ(note.find("check/load_vertical"), std::string::npos) << note;
+}
+
 TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   DiagnoseOptions o;
   o.effects = {"joint-closure", "moss"};

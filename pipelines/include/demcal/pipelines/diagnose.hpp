@@ -231,6 +231,11 @@ struct HeldOutCheck {
 };
 HeldOutCheck check_held_out(const EffectCandidate& candidate, const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
+// When the diagnosis names no effect: a sentence for its verdict on the held-out channels that the
+// base fit misses (not in diagnosis.held_out_checked), with their RMS error against their noise,
+// since an effect may show only in data the fits did not use. "" when there are none.
+std::string unfitted_data_note(const Diagnosis& diagnosis);
+
 // Runs the loop on a campaign (the same file `demcal calibrate` takes). Throws CampaignError for
 // bad input found before the first simulation; failed candidate calibrations become "rejected"
 // candidates with a reason, and the diagnosis goes on.
