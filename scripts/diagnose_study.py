@@ -6,7 +6,7 @@ well its parameters came back, and how far the error fell.
 
 usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
-                         [--candidate-simulations 80] [--surrogate-kind mlp] [--jobs 1]
+                         [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--jobs 1]
 
 Each case and seed gets OUT_DIR/<case>/seed-<s>/ (measured.csv, campaign.json, the diagnosis in
 diag/). A finished diagnosis (diag/diagnosis.json) is read, not run again, so the study resumes.
@@ -50,8 +50,9 @@ def campaign(measured, args):
         "parameters": [{"name": "kn", "lower": 1e8, "upper": 1e10, "scale": "log10"},
                        {"name": "ks", "lower": 1e8, "upper": 1e10, "scale": "log10"},
                        {"name": "friction_deg", "lower": 25, "upper": 45}],
-        # the abutment gauge is not fitted (docs/diagnose.md): it is the check on data not fitted
-        "objective": {"type": 1, "weights": {"abutment_horizontal": 0}},
+        # by default the abutment gauge is not fitted (docs/diagnose.md): it is the check on data not
+        # fitted; --fit-abutment fits it too
+        "objective": {"type": 1, "weights": {} if args.fit_abutment else {"abutment_horizontal": 0}},
         "optimiser": {"algorithm": "tbpso", "population": 10, "iterations": 6, "seed": 1},
         "polish": {"algorithm": "LN_SBPLX", "max_evaluations": 20},
         "report": False,
@@ -130,6 +131,8 @@ def main():
     p.add_argument("--max-displacement", type=float, default=0.008)
     p.add_argument("--candidate-simulations", type=int, default=80)
     p.add_argument("--effects", default="all", help="effects the diagnosis considers")
+    p.add_argument("--fit-abutment", action="store_true",
+                   help="fit the abutment gauge's channel too (default: weight 0, a check on data not fitted)")
     p.add_argument("--surrogate-kind", default="", help="the searches' surrogate (gp | mlp; default: demcal's)")
     p.add_argument("--jobs", type=int, default=1)
     args = p.parse_args()
