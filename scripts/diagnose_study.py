@@ -6,7 +6,8 @@ well its parameters came back, and how far the error fell.
 
 usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
-                         [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--jobs 1]
+                         [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--magnitude 1]
+                         [--jobs 1]
 
 Each case and seed gets OUT_DIR/<case>/seed-<s>/ (measured.csv, campaign.json, the diagnosis in
 diag/). A finished diagnosis (diag/diagnosis.json) is read, not run again, so the study resumes.
@@ -26,18 +27,40 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 # calibration sets them), then per case the `demcal scene arch` flags of the hidden effect and the
 # effect parameters that a diagnosis should recover (suffix of the calibrated parameter's name).
 BASE_TRUTH = {"kn": 2.6e9, "ks": 0.9e9, "friction_deg": 32.3}
-CASES = {
-    "none": ([], {}),
-    "support-compliance": (["--support-kx", "5e6", "--support-ky", "1e9", "--support-kr", "1e9",
-                            "--support-blocks", "abutment_right"],
-                           {"support_kx": 5e6}),
-    "friction-softening": (["--friction-residual-deg", "22", "--slip-softening", "0.001"],
-                           {"friction_residual_deg": 22, "slip_softening": 0.001}),
-    "joint-closure": (["--closure-max", "1e-4"], {"closure_max": 1e-4}),
-    "cohesion": (["--cohesion", "3e4", "--tensile-strength", "3e4"], {"cohesion": 3e4, "tensile_strength": 3e4}),
-    "crushing-cap": (["--compressive-strength", "2e6"], {"compressive_strength": 2e6}),
-    "boundary-restraint": (["--beam-kr", "3e4"], {"beam_kr": 3e4}),
-}
+
+
+def hidden_effect(case, magnitude=1.0):
+    """(scene flags, truth) of a case with its effect at `magnitude` x the study's default strength:
+    the departure from the plain model grows with it (a support's compliance, a friction drop, a
+    joint's inverse maximum closure, a cohesion, a crushing cap's inverse strength, a beam's
+    rotational stiffness)."""
+    m = magnitude
+    if case == "none":
+        return [], {}
+    if case == "support-compliance":
+        return (["--support-kx", "%g" % (5e6 / m), "--support-ky", "1e9", "--support-kr", "1e9",
+                 "--support-blocks", "abutment_right"], {"support_kx": 5e6 / m})
+    if case == "friction-softening":
+        residual = BASE_TRUTH["friction_deg"] - 10.3 * m
+        # the scene's own friction set to the truth too, which the residual may not exceed
+        return (["--friction-deg", "%r" % BASE_TRUTH["friction_deg"], "--friction-residual-deg", "%g" % residual,
+                 "--slip-softening", "0.001"],
+                {"friction_residual_deg": residual, "slip_softening": 0.001})
+    if case == "joint-closure":
+        # the hyperbola departs from the linear law the more, the smaller its maximum closure
+        return ["--closure-max", "%g" % (1e-4 / m)], {"closure_max": 1e-4 / m}
+    if case == "cohesion":
+        return (["--cohesion", "%g" % (3e4 * m), "--tensile-strength", "%g" % (3e4 * m)],
+                {"cohesion": 3e4 * m, "tensile_strength": 3e4 * m})
+    if case == "crushing-cap":
+        return ["--compressive-strength", "%g" % (2e6 / m)], {"compressive_strength": 2e6 / m}
+    if case == "boundary-restraint":
+        return ["--beam-kr", "%g" % (3e4 * m)], {"beam_kr": 3e4 * m}
+    raise KeyError(case)
+
+
+CASES = ["none", "support-compliance", "friction-softening", "joint-closure", "cohesion", "crushing-cap",
+         "boundary-restraint"]
 
 
 def campaign(measured, args):
@@ -65,7 +88,7 @@ def run_one(binary, args, case, seed):
     if not os.path.exists(result):
         os.makedirs(folder, exist_ok=True)
         measured = os.path.join(folder, "measured.csv")
-        flags, _ = CASES[case]
+        flags, _ = hidden_effect(case, args.magnitude)
         params = ["--param=%s=%r" % (k, v) for k, v in BASE_TRUTH.items()]
         subprocess.run([sys.executable, os.path.join(HERE, "synthetic_measurement.py"), binary, measured,
                         "--seed", str(seed), "--displacement-noise", "0", *params, "--", "arch",
@@ -84,9 +107,9 @@ def run_one(binary, args, case, seed):
         return json.load(f)
 
 
-def recovered(diagnosis, case):
+def recovered(diagnosis, case, magnitude):
     """Largest relative error of the hidden effect's parameters in the chosen fit (None: not chosen)."""
-    _, truth = CASES[case]
+    _, truth = hidden_effect(case, magnitude)
     for c in diagnosis["candidates"]:
         if c["effect"] != case or c["verdict"] != "accepted":
             continue
@@ -134,8 +157,12 @@ def main():
     p.add_argument("--fit-abutment", action="store_true",
                    help="fit the abutment gauge's channel too (default: weight 0, a check on data not fitted)")
     p.add_argument("--surrogate-kind", default="", help="the searches' surrogate (gp | mlp; default: demcal's)")
+    p.add_argument("--magnitude", type=float, default=1.0,
+                   help="strength of the hidden effects, x the study's default (detection limits; > 0)")
     p.add_argument("--jobs", type=int, default=1)
     args = p.parse_args()
+    if not args.magnitude > 0:
+        p.error("--magnitude must be > 0, got %r" % args.magnitude)
     binary = os.path.abspath(args.binary)
     cases = [c for c in args.cases.split(",") if c]
     for c in cases:
@@ -157,7 +184,7 @@ def main():
             before, after = d["error_before"], d["error_after"]
             noise = math.sqrt(sum(v * v for v in d["noise"].values()) / max(1, len(d["noise"])))
             rows.append({"case": case, "seed": seed, "chosen": chosen, "right": right,
-                         "recovery": recovered(d, case), "before": before, "after": after,
+                         "recovery": recovered(d, case, args.magnitude), "before": before, "after": after,
                          "ratio": after / before if before else float("nan"), "noise": noise,
                          "simulations": d["simulations"], "verdict": d["verdict"]})
             print("%s seed %d: chosen %s, error %.0f -> %.0f N" % (case, seed, chosen or "none", before, after),

@@ -17,7 +17,7 @@ struct DiagnoseFlags {
   std::string campaign_file;
   std::string effects = "all";
   std::string held_out;
-  bool no_report = false, quiet = false;
+  bool no_report = false, quiet = false, no_bounds = false;
 };
 
 // Names separated by commas; "all" or "" = none (every effect, for --effects).
@@ -37,6 +37,7 @@ void run(const DiagnoseFlags& f) {
   o.effects = split_names(f.effects);
   o.held_out_cases = split_names(f.held_out);
   o.report = !f.no_report;
+  o.bound_parameters = !f.no_bounds;
   o.progress = !f.quiet;
   const Diagnosis d = run_diagnosis(config, o);
   std::cout << d.verdict << "\n";
@@ -70,6 +71,8 @@ void setup(CLI::App& app) {
                   "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)")->capture_default_str();
   sub->add_flag("--resume", o.resume, "Continue interrupted calibrations from their archives");
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");
+  sub->add_flag("--no-parameter-bounds", flags->no_bounds,
+                "Skip the check of how tightly the data pin an accepted effect's parameters (4 runs each)");
   sub->add_flag("--quiet", flags->quiet, "No progress lines");
   sub->callback([flags] { run(*flags); });
 }

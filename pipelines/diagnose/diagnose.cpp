@@ -545,6 +545,45 @@ std::string finding(const EffectCandidate& c, const std::map<std::string, double
 
 // ---- stage 5: selection ------------------------------------------------------------------------
 
+// Values tried for one effect parameter's bound (ParameterBound), inside its search range and, for a
+// residual friction, at most the fit's friction; none equal to the best.
+std::vector<double> bound_trial_values(const dem::EffectParameter& p, double best, double cap) {
+  std::vector<double> values;
+  const double upper = std::min(p.search_max, cap);
+  constexpr double kLogFactors[] = {0.1, 1.0 / 3, 3, 10};
+  constexpr double kLinearShares[] = {-0.3, -0.1, 0.1, 0.3};
+  for (int k = 0; k < 4; ++k) {
+    const double v = p.log_scale ? best * kLogFactors[k] : best + kLinearShares[k] * (p.search_max - p.search_min);
+    const double clipped = std::clamp(v, p.search_min, std::max(upper, p.search_min));
+    if (clipped != best && std::find(values.begin(), values.end(), clipped) == values.end()) values.push_back(clipped);
+  }
+  return values;
+}
+
+// The bounds of every parameter of candidate c's effect (its fit re-simulated on the fitted cases
+// with one parameter moved at a time), within the diagnosis's simulation budget.
+void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const std::map<std::string, double>& best,
+                             const std::vector<ChannelResidual>& grid, CaseRunner& runner, const DiagnoseOptions& options) {
+  const CampaignConfig fitted = fitted_cases(m.config, options);
+  const long runs_per_trial = static_cast<long>(fitted.cases.size());
+  for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
+    const std::string& name = m.parameter_names[i];
+    if (!m.parameters[i] || !best.count(name)) continue;
+    const auto values = bound_trial_values(*m.parameters[i], best.at(name), friction_cap(name, best));
+    if (options.max_simulations > 0 &&
+        runner.simulations() + runs_per_trial * static_cast<long>(values.size()) > options.max_simulations)
+      return;  // over the budget: the remaining parameters stay unchecked
+    std::vector<std::pair<double, double>> trials;
+    for (double v : values) {
+      std::map<std::string, double> params = best;
+      params[name] = v;
+      const Evaluation e = runner.evaluate(fitted, params, &grid);
+      trials.emplace_back(v, e.ok ? information_criterion_change(c.residuals, e.residuals, 0) : Diagnosis::kNaN);
+    }
+    c.bounds.push_back(bound_from_trials(name, best.at(name), trials, options.evidence_threshold));
+  }
+}
+
 void select(Diagnosis& d, const DiagnoseOptions& options) {
   std::vector<EffectCandidate*> accepted;
   for (auto& c : d.candidates) {
@@ -744,6 +783,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
 
   const double error_floor = std::hypot(noise, std::isfinite(scatter) ? scatter : 0.0);  // what no model can remove
   const bool at_noise = d.error_before <= options.noise_level_ratio * error_floor;
+  std::map<std::string, ExtendedModel> models;                   // effect -> its best-signature extension
+  std::map<std::string, std::map<std::string, double>> best_sets;  // effect -> its fit's complete parameter set
   if (at_noise) {
     for (const auto* e : effects) {
       EffectCandidate c;
@@ -755,7 +796,6 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     // 3. signatures
     const auto residual = stacked(base.residuals, nullptr);
     const auto sensitivities = base_sensitivities(fitted, base_params, base.residuals, runner);
-    std::map<std::string, ExtendedModel> models;
     std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> best probe's parameters
     const dem::Scene first_scene = build_scene(config.cases.front().scene, config.source + ": cases[0].scene");
     for (const auto* e : effects) {
@@ -839,7 +879,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.params = r.best.params;
         c.fitness = r.best.fitness;
         // on every case, the held-out ones included: the fit is judged on the data it did not use too
-        const Evaluation e = runner.evaluate(m.config, complete_parameters(ext, r.best.params), &base.residuals);
+        best_sets[c.effect] = complete_parameters(ext, r.best.params);
+        const Evaluation e = runner.evaluate(m.config, best_sets[c.effect], &base.residuals);
         if (!e.ok) {
           c.reason = "its best set cannot be re-simulated: " + e.message;
           continue;
@@ -864,6 +905,21 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
                 " N, scatter of the simulated curve about " + format_number(scatter) + " N)." + unfitted_data_note(d);
   } else {
     select(d, options);
+    if (options.bound_parameters) {
+      std::vector<std::string> bounds;  // of the chosen effect, for the verdict
+      for (auto& c : d.candidates) {
+        if (c.verdict != "accepted" && c.verdict != "tied") continue;
+        progress(options, "checking how tightly the data pin the parameters of " + c.effect);
+        bound_effect_parameters(c, models.at(c.effect), best_sets.at(c.effect), base.residuals, runner, options);
+        if (c.verdict == "accepted")
+          for (const auto& b : c.bounds) bounds.push_back(b.describe());
+      }
+      if (!bounds.empty()) {
+        d.verdict += " How tightly the data pin it, each parameter moved alone:";
+        for (std::size_t i = 0; i < bounds.size(); ++i) d.verdict += (i ? "; " : " ") + bounds[i];
+        d.verdict += ".";
+      }
+    }
   }
   d.simulations = runner.simulations();
   d.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -901,6 +957,11 @@ json Diagnosis::to_json() const {
                      {"held_out_rms", params_json(c.held_out_rms)}});
     cands.back()["error"] = finite_or_null(c.error);
     cands.back()["held_out_error"] = finite_or_null(c.held_out_error);
+    if (!c.bounds.empty()) {
+      json bounds = json::object();
+      for (const auto& b : c.bounds) bounds[b.name] = b.to_json();
+      cands.back()["bounds"] = bounds;
+    }
   }
   return {{"status", status},
           {"message", message},

@@ -131,6 +131,17 @@ void write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) 
     md << "### " << c.effect << ": best set\n\n| parameter | value |\n|---|---|\n";
     for (const auto& [k, v] : c.params) md << "| " << k << " | " << num(v, 4) << " |\n";
     md << "\n";
+    if (c.bounds.empty()) continue;
+    md << "How tightly the data pin the effect's parameters: each moved alone, the others at the best set; a value "
+          "is ruled out when the criterion rises by more than " << num(options.evidence_threshold)
+       << " (the margin an effect needs to be accepted).\n\n| parameter | values tried (criterion change) | bound |\n|---|---|---|\n";
+    for (const auto& b : c.bounds) {
+      md << "| " << b.name << " | ";
+      for (std::size_t i = 0; i < b.trials.size(); ++i)
+        md << (i ? ", " : "") << num(b.trials[i].first) << " (" << num(b.trials[i].second, 2) << ")";
+      md << " | " << b.describe() << " |\n";
+    }
+    md << "\n";
   }
   const fs::path path = out_dir / "report.md";
   std::ofstream out(path);

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <sstream>
 
 namespace demcal::pipelines {
 
@@ -218,6 +219,52 @@ double signature_score(const std::vector<double>& residual, const std::vector<st
     best = std::min(best, (r - a * w).squaredNorm());
   }
   return std::clamp(1 - best / without, 0.0, 1.0);
+}
+
+ParameterBound bound_from_trials(const std::string& name, double best, std::vector<std::pair<double, double>> trials,
+                                 double threshold) {
+  ParameterBound b;
+  b.name = name;
+  b.best = best;
+  trials.erase(std::remove_if(trials.begin(), trials.end(), [](const auto& t) { return !std::isfinite(t.second); }),
+               trials.end());
+  std::sort(trials.begin(), trials.end());
+  for (const auto& [value, change] : trials) {
+    if (!(change > threshold)) continue;
+    if (value < best) b.lower = value;                               // the last one below is the nearest
+    if (value > best && !std::isfinite(b.upper)) b.upper = value;    // the first one above is the nearest
+  }
+  b.trials = std::move(trials);
+  return b;
+}
+
+std::string ParameterBound::describe() const {
+  auto number = [](double v) {
+    std::ostringstream s;
+    s.precision(3);
+    s << v;
+    return s.str();
+  };
+  // An unbounded side: the farthest value tried there fits as well, or nothing could be tried there.
+  auto open_side = [&](bool below) {
+    double v = best;
+    for (const auto& [value, change] : trials)
+      if (below ? value < v : value > v) v = value;
+    if (v == best) return std::string(below ? "at the bottom" : "at the top") + " of its search range";
+    return std::string(below ? "not bounded below (down to " : "not bounded above (up to ") + number(v) + " fits as well)";
+  };
+  std::string s = name + " " + number(best) + ": ";
+  if (trials.empty()) return s + "not checked (every run of the check failed)";
+  if (bounded()) return s + "between " + number(lower) + " and " + number(upper) + " (values beyond fit clearly worse)";
+  if (std::isfinite(lower)) return s + "above " + number(lower) + ", " + open_side(false);
+  if (std::isfinite(upper)) return s + "below " + number(upper) + ", " + open_side(true);
+  return s + "not pinned by the data: " + open_side(true) + ", " + open_side(false);
+}
+
+json ParameterBound::to_json() const {
+  json t = json::array();
+  for (const auto& [value, change] : trials) t.push_back({value, change});
+  return {{"best", best}, {"lower", finite_or_null(lower)}, {"upper", finite_or_null(upper)}, {"trials", t}};
 }
 
 }  // namespace demcal::pipelines

@@ -9,6 +9,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
+#include <map>
 #include <random>
 
 using namespace demcal;
@@ -173,6 +175,37 @@ TEST(Evidence, ANoEffectVerdictNamesHeldOutDataTheBaseFitMisses) {
   EXPECT_EQ(note.find("check/load_vertical"), std::string::npos) << note;
 }
 
+TEST(Evidence, ParameterBoundsAreTheNearestRuledOutValues) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  // ruled out on both sides, more strongly farther out
+  ParameterBound b = bound_from_trials("closure_max", 1e-4, {{3e-4, 15}, {1e-5, 40}, {3.3e-5, 12}, {1e-3, 50}}, 10);
+  EXPECT_TRUE(b.bounded());
+  EXPECT_EQ(b.lower, 3.3e-5);
+  EXPECT_EQ(b.upper, 3e-4);
+  ASSERT_EQ(b.trials.size(), 4u);
+  EXPECT_EQ(b.trials.front().first, 1e-5);  // sorted by value
+  EXPECT_NE(b.describe().find("between 3.3e-05 and 0.0003"), std::string::npos) << b.describe();
+  // flat above the best: bounded below only, and the farthest value tried above is named
+  b = bound_from_trials("beam_kr", 3e7, {{3e6, 12}, {1e7, 2}, {9e7, 1}, {3e8, 0.5}}, 10);
+  EXPECT_EQ(b.lower, 3e6);
+  EXPECT_TRUE(std::isnan(b.upper));
+  EXPECT_NE(b.describe().find("not bounded above (up to 3e+08"), std::string::npos) << b.describe();
+  // the nearest ruled-out value bounds it, even where a value farther out fits well again
+  b = bound_from_trials("x", 1, {{0.1, 1}, {0.3, 20}, {3, 20}, {10, 1}}, 10);
+  EXPECT_EQ(b.lower, 0.3);
+  EXPECT_EQ(b.upper, 3);
+  // a failed run is no trial; a rise equal to the threshold rules nothing out; nothing tried below
+  b = bound_from_trials("x", 1, {{0.5, nan}, {2, 10}}, 10);
+  EXPECT_EQ(b.trials.size(), 1u);
+  EXPECT_FALSE(std::isfinite(b.lower) || std::isfinite(b.upper));
+  EXPECT_NE(b.describe().find("not pinned by the data: at the bottom of its search range"), std::string::npos) << b.describe();
+  EXPECT_NE(bound_from_trials("x", 1, {}, 10).describe().find("not checked"), std::string::npos);
+  const json j = bound_from_trials("x", 1, {{0.3, 20}, {3, 2}}, 10).to_json();
+  EXPECT_EQ(j["lower"].get<double>(), 0.3);
+  EXPECT_TRUE(j["upper"].is_null());
+  EXPECT_EQ(j["trials"].size(), 2u);
+}
+
 TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   DiagnoseOptions o;
   o.effects = {"joint-closure", "moss"};
@@ -305,10 +338,31 @@ TEST(DiagnoseLoop, NamesHiddenFrictionSofteningAndRecoversIt) {
   EXPECT_NEAR(found.at("friction_deg"), 32.3, 1.5);
   EXPECT_NEAR(found.at("friction_residual_deg"), 22, 2);
   EXPECT_NEAR(std::log(found.at("slip_softening") / 1e-3), 0, std::log(2.0));
+  // how tightly the data pin the effect's parameters: both checked, the truth inside what is not ruled out
+  const auto& accepted = *std::find_if(d.candidates.begin(), d.candidates.end(),
+                                       [](const EffectCandidate& c) { return c.verdict == "accepted"; });
+  ASSERT_EQ(accepted.bounds.size(), 2u);
+  for (const auto& [name, truth] : std::map<std::string, double>{{"friction_residual_deg", 22}, {"slip_softening", 1e-3}}) {
+    const auto b = std::find_if(accepted.bounds.begin(), accepted.bounds.end(), [&](const ParameterBound& x) { return x.name == name; });
+    ASSERT_NE(b, accepted.bounds.end()) << name;
+    EXPECT_GE(b->trials.size(), 3u) << name;
+    EXPECT_EQ(b->best, found.at(name));
+    if (std::isfinite(b->lower)) {
+      EXPECT_LT(b->lower, truth) << b->describe();
+    }
+    if (std::isfinite(b->upper)) {
+      EXPECT_GT(b->upper, truth) << b->describe();
+    }
+  }
+  EXPECT_NE(d.verdict.find("How tightly the data pin it"), std::string::npos) << d.verdict;
   const json j = test_support::read_json(dir / "out" / "diagnosis.json");
   for (const char* key : {"base", "noise", "candidates", "chosen", "error_before", "error_after"})
     EXPECT_TRUE(j.contains(key)) << key;
   EXPECT_EQ(j["candidates"].size(), 2u);
+  for (const auto& c : j["candidates"])
+    if (c["verdict"] == "accepted") {
+      EXPECT_EQ(c["bounds"].size(), 2u) << c.dump();
+    }
   EXPECT_TRUE(fs::exists(dir / "out" / "report.md"));
   EXPECT_TRUE(fs::exists(dir / "out" / "archive.sqlite"));  // one archive for every calibration
 }

@@ -21,7 +21,9 @@
 //                    independent points (the residual is autocorrelated): accepted when it falls
 //                    by more than `evidence_threshold`; "no effect needed" when none is accepted or
 //                    the base residual is already at the noise level; two accepted effects within
-//                    `tie_margin` of each other are "tied", and then none is chosen.
+//                    `tie_margin` of each other are "tied", and then none is chosen;
+//   6. bounds        for an accepted or tied effect, how tightly the data pin each of its
+//                    parameters (ParameterBound: the fit re-run with that parameter moved alone).
 //
 // Outputs: <out>/diagnosis.json (layout in docs/diagnose.md) and <out>/report.md with residual
 // plots before and after, the table of candidates and the verdict in words. Forces in N,
@@ -33,6 +35,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <limits>
 #include <map>
 #include <string>
@@ -114,6 +117,31 @@ double information_criterion_change(const std::vector<ChannelResidual>& base,
 double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
                        const std::vector<std::vector<double>>& signatures);
 
+// How tightly the data pin one effect parameter of an accepted (or tied) fit. The fit is
+// re-simulated with that parameter alone moved, the others at the best: by factors 1/10, 1/3, 3 and
+// 10 for a log-scaled parameter, by -0.3, -0.1, +0.1 and +0.3 of its search range for a linear one,
+// within the search range. A tried value is ruled out when the information criterion (as in
+// information_criterion_change, no extra parameter) rises by more than `threshold` over the best:
+// the diagnosis uses its evidence_threshold, so the data must prefer the best over a value by as
+// much as they must prefer an effect over the base model. The others are not re-fitted, so the
+// interval is conditional: the uncertainty is at least this wide.
+struct ParameterBound {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  std::string name;                                // set_parameter name
+  double best = kNaN;
+  double lower = kNaN;   // the ruled-out tried value nearest below the best (NaN: none below is)
+  double upper = kNaN;   // the ruled-out tried value nearest above the best (NaN: none above is)
+  std::vector<std::pair<double, double>> trials;   // (value, criterion change against the best), by value
+  bool bounded() const { return std::isfinite(lower) && std::isfinite(upper); }
+  std::string describe() const;                    // one phrase, e.g. "beam_kr 3.4e+07: not bounded above (...)"
+  nlohmann::json to_json() const;                  // {"best", "lower", "upper" (null: not bounded), "trials"}
+};
+
+// The bound from trials (value, criterion change; a NaN change = a failed run, ignored).
+ParameterBound bound_from_trials(const std::string& name, double best, std::vector<std::pair<double, double>> trials,
+                                 double threshold);
+
 // ---- the loop ----------------------------------------------------------------------------------
 
 struct DiagnoseOptions {
@@ -166,6 +194,9 @@ struct DiagnoseOptions {
   std::vector<std::string> held_out_cases;
   double held_out_tolerance = 0.1;        // share of the base fit's held-out error, >= 0
   double held_out_reproduced_ratio = 2;   // base RMS / noise at or below this: a checking channel, >= 1
+  // Check how tightly the data pin each parameter of an accepted or tied effect (ParameterBound):
+  // four runs per effect parameter, within max_simulations.
+  bool bound_parameters = true;
   bool resume = false;                    // continue the base and candidate campaigns from their archives
   bool progress = true;                   // progress lines on stderr
   bool report = true;                     // report.md with figures
@@ -190,6 +221,7 @@ struct EffectCandidate {
   std::vector<ChannelResidual> residuals;  // of the best extended set
   std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
+  std::vector<ParameterBound> bounds;      // of the effect's parameters, when accepted or tied
 };
 
 struct Diagnosis {
