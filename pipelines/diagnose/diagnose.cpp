@@ -1,6 +1,7 @@
 // The diagnosis loop (diagnose.hpp): base fit, residual, signatures, extended calibrations,
 // selection. Each stage is one function; run_diagnosis lists them.
 #include "demcal/pipelines/diagnose.hpp"
+#include "diagnose_internal.hpp"
 
 #include "demcal/dem/effects.hpp"
 #include "demcal/pipelines/predict.hpp"
@@ -19,7 +20,8 @@ namespace demcal::pipelines {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);  // diagnose_report.cpp
+using detail::format_number;
+using detail::write_diagnosis_report;
 
 void DiagnoseOptions::Validate() const {
   auto fail = [](const std::string& field, const std::string& value, const std::string& rule) {
@@ -489,13 +491,6 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
     c.polish.options.max_evaluations = std::min<long>(c.polish.options.max_evaluations, evaluations / 4);
   }
   return c;
-}
-
-std::string format_number(double v, int digits = 3) {
-  std::ostringstream s;
-  s.precision(digits);
-  s << v;
-  return s.str();
 }
 
 // The chosen effect's finding in a structural engineer's words, from its fitted parameters.

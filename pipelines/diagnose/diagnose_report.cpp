@@ -1,6 +1,7 @@
 // report.md of a diagnosis: the verdict, the residual before and after (numbers and figures), and
 // the table of candidate effects.
 #include "demcal/pipelines/diagnose.hpp"
+#include "diagnose_internal.hpp"
 #include "demcal/pipelines/report.hpp"
 
 #include <algorithm>
@@ -15,13 +16,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string num(double v, int digits = 3) {
-  if (!std::isfinite(v)) return "–";
-  std::ostringstream s;
-  s.precision(digits);
-  s << v;
-  return s.str();
-}
+std::string num(double v, int digits = 3) { return std::isfinite(v) ? detail::format_number(v, digits) : "–"; }
 
 std::string file_safe(std::string s) {
   for (auto& ch : s)
@@ -58,7 +53,7 @@ std::string residual_figure(const ChannelResidual& base, const ChannelResidual* 
 
 }  // namespace
 
-void write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) {
+void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) {
   const fs::path out_dir = options.output, figures = out_dir / "figures";
   fs::create_directories(figures);
   const EffectCandidate* after = nullptr;

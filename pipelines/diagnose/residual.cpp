@@ -1,5 +1,6 @@
 // Residual analysis and evidence of the diagnosis (diagnose.hpp): pure functions of curves.
 #include "demcal/pipelines/diagnose.hpp"
+#include "diagnose_internal.hpp"
 #include "demcal/smoothing/objective.hpp"
 
 #include <Eigen/Dense>
@@ -238,13 +239,15 @@ ParameterBound bound_from_trials(const std::string& name, double best, std::vect
   return b;
 }
 
+std::string detail::format_number(double v, int digits) {
+  std::ostringstream s;
+  s.precision(digits);
+  s << v;
+  return s.str();
+}
+
 std::string ParameterBound::describe() const {
-  auto number = [](double v) {
-    std::ostringstream s;
-    s.precision(3);
-    s << v;
-    return s.str();
-  };
+  const auto number = [](double v) { return detail::format_number(v); };
   // An unbounded side: the farthest value tried there fits as well, or nothing could be tried there.
   auto open_side = [&](bool below) {
     double v = best;

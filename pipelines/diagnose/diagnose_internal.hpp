@@ -1,0 +1,16 @@
+// Shared by the diagnosis's sources (diagnose.cpp, residual.cpp, diagnose_report.cpp).
+#pragma once
+
+#include "demcal/pipelines/diagnose.hpp"
+
+#include <string>
+
+namespace demcal::pipelines::detail {
+
+// A number in a verdict or report: `digits` significant digits, shortest form (3 -> "0.000139").
+std::string format_number(double v, int digits = 3);
+
+// report.md and its figures (diagnose_report.cpp).
+void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+}  // namespace demcal::pipelines::detail
