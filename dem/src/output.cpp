@@ -14,7 +14,8 @@ json summary_json(const Recording& r) {
   json joints = json::array();
   for (const JointReport& j : r.joints)
     joints.push_back({{"name", j.name}, {"joint_group", j.joint_group}, {"open_fraction", j.open_fraction},
-                      {"rotation", j.rotation}, {"slip", j.slip}, {"hinge", j.hinge}, {"sliding", j.sliding}});
+                      {"rotation", j.rotation}, {"slip", j.slip}, {"hinge", j.hinge}, {"sliding", j.sliding},
+                      {"max_normal_stress", j.max_normal_stress}});
   return {{"status", to_string(r.status)},
           {"message", r.message},
           {"peak_force", r.peak_force},
@@ -23,6 +24,7 @@ json summary_json(const Recording& r) {
           {"time_step", r.time_step},
           {"wall_time_s", r.wall_time_s},
           {"max_block_displacement", r.max_block_displacement},
+          {"max_normal_stress", r.max_normal_stress},
           {"contact_point_updates", r.contact_point_updates},
           {"rows", r.time.size()},
           {"hinges", r.hinges},

@@ -113,6 +113,7 @@ struct Contact {
   // Joint history since the gauges were zeroed.
   double slip = 0;
   bool ever_touched = false;
+  double max_normal_stress = 0;  // Pa, over the recorded rows
   std::vector<NodeHistory> history;  // per node, only for joint groups with an effect on (kept last:
                                      // the plain law's hot fields keep their place)
 };
@@ -1052,6 +1053,16 @@ void Engine::record_row(double load_time, double force) {
     const Vec2 p = bodies_[gauge_points_[g].body].to_world(gauge_points_[g].local);
     rec_.gauge_values[g].push_back((p - gauge_zero_[g]).dot(scene_.gauges[g].direction));
   }
+  // Normal stress at each node from its last gap, through the group's closure law (the elastic
+  // closure: penetration less any plastic closure after crushing).
+  for (Contact& c : contacts_) {
+    if (!c.active) continue;
+    const EffectLaw& law = groups_[c.group].effects;
+    for (std::size_t k = 0; k < c.gap.size(); ++k) {
+      const double elastic = -c.gap[k] - (k < c.history.size() ? c.history[k].plastic_closure : 0.0);
+      if (elastic > 0) c.max_normal_stress = std::max(c.max_normal_stress, law.normal_stress(elastic));
+    }
+  }
 }
 
 Recording Engine::run(const RunControl& control) {
@@ -1174,6 +1185,8 @@ void Engine::finish(Recording& rec) const {
     j.open_fraction = c->gap.empty() ? 1.0 : double(open) / c->gap.size();
     j.rotation = (bodies_[ib].angle - zero_angles_[ib]) - (bodies_[ia].angle - zero_angles_[ia]);
     j.slip = c->slip;
+    j.max_normal_stress = c->max_normal_stress;
+    rec.max_normal_stress = std::max(rec.max_normal_stress, c->max_normal_stress);
     rec.joints.push_back(std::move(j));
   }
   // A hinge or a sliding joint is one of the mechanism's dominant joints: at least a quarter of the

@@ -43,12 +43,14 @@ SimulationOutcome outcome_from_recording(const dem::Recording& rec) {
   d["gravity_steps"] = rec.gravity_steps;
   d["time_step"] = rec.time_step;
   d["max_block_displacement"] = rec.max_block_displacement;
+  d["max_normal_stress"] = rec.max_normal_stress;
   d["hinges"] = rec.hinges;
   d["sliding_joints"] = rec.sliding_joints;
   nlohmann::json joints = nlohmann::json::array();
   for (const auto& j : rec.joints)
     joints.push_back({{"name", j.name}, {"joint_group", j.joint_group}, {"open_fraction", j.open_fraction},
-                      {"rotation", j.rotation}, {"slip", j.slip}, {"hinge", j.hinge}, {"sliding", j.sliding}});
+                      {"rotation", j.rotation}, {"slip", j.slip}, {"hinge", j.hinge}, {"sliding", j.sliding},
+                      {"max_normal_stress", j.max_normal_stress}});
   d["joints"] = joints;
   nlohmann::json blocks = nlohmann::json::array();
   for (const auto& b : rec.final_blocks) {

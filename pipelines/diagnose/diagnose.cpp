@@ -21,6 +21,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 using detail::format_number;
+using detail::parameter_field;
 using detail::write_diagnosis_report;
 
 void DiagnoseOptions::Validate() const {
@@ -255,21 +256,32 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
 struct ExtendedModel {
   CampaignConfig config;
   std::vector<std::string> parameter_names;                   // set_parameter names of the effect
-  std::vector<const dem::EffectParameter*> parameters;       // registry entry of each name
+  std::vector<dem::EffectParameter> parameters;              // registry entry of each name, range resolved
   std::string target;
 };
 
-const dem::EffectParameter* registry_parameter(const dem::Effect& effect, const std::string& name) {
-  const auto dot = name.rfind('.');
-  const std::string field = dot == std::string::npos ? name : name.substr(dot + 1);
+// The registry entry of an effect parameter's set_parameter name, its search range resolved for
+// this structure (dem::scaled_search_range).
+dem::EffectParameter registry_parameter(const dem::Effect& effect, const std::string& name,
+                                        const dem::ResponseScales& scales) {
   for (const auto& p : effect.parameters)
-    if (p.name == field) return &p;
-  return nullptr;
+    if (p.name == parameter_field(name)) return dem::scaled_search_range(p, scales);
+  throw CampaignError("effect parameter " + name + " is not in the effect registry");
+}
+
+// What the base best run reached, for the structure-relative search ranges: the largest contact
+// stress over the fitted cases (0 when a backend does not report it).
+dem::ResponseScales response_scales(const Evaluation& base, const DiagnoseOptions& options) {
+  dem::ResponseScales s;
+  for (const auto& c : base.cases)
+    if (!is_held_out(c.name, options.held_out_cases) && c.details.contains("max_normal_stress") && c.details["max_normal_stress"].is_number())
+      s.peak_normal_stress = std::max(s.peak_normal_stress, c.details["max_normal_stress"].get<double>());
+  return s;
 }
 
 // The base model with `effect` switched on for `targets` in every case's scene (written to folder).
 ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, const std::vector<std::string>& targets,
-                     const fs::path& folder) {
+                     const dem::ResponseScales& scales, const fs::path& folder) {
   ExtendedModel m;
   m.config = config;
   m.target = targets.empty() ? "" : targets.front();
@@ -282,11 +294,8 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
     // (the name without its group), so that the search gains as few dimensions as the effect has.
     if (effect.target == dem::EffectTarget::joint_groups) {
       std::vector<std::string> fields;
-      for (const auto& n : names) {
-        const auto dot = n.rfind('.');
-        const std::string field = dot == std::string::npos ? n : n.substr(dot + 1);
-        if (std::find(fields.begin(), fields.end(), field) == fields.end()) fields.push_back(field);
-      }
+      for (const auto& n : names)
+        if (std::find(fields.begin(), fields.end(), parameter_field(n)) == fields.end()) fields.push_back(parameter_field(n));
       names = fields;
     }
     if (k == 0) {
@@ -299,7 +308,7 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
     c.scene = SceneSpec{};
     c.scene.file = fs::absolute(file).string();
   }
-  for (const auto& n : m.parameter_names) m.parameters.push_back(registry_parameter(effect, n));
+  for (const auto& n : m.parameter_names) m.parameters.push_back(registry_parameter(effect, n, scales));
   return m;
 }
 
@@ -327,8 +336,7 @@ std::map<std::string, double> effect_values(const ExtendedModel& m, const std::m
                                             const std::vector<double>& t) {
   std::map<std::string, double> values = base;
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i)
-    if (m.parameters[i])
-      values[m.parameter_names[i]] = std::min(at_fraction(*m.parameters[i], t[i]), friction_cap(m.parameter_names[i], base));
+    values[m.parameter_names[i]] = std::min(at_fraction(m.parameters[i], t[i]), friction_cap(m.parameter_names[i], base));
   return values;
 }
 
@@ -448,16 +456,15 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
     space.add(s);
   }
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
-    const auto* p = m.parameters[i];
-    if (!p) throw CampaignError("effect parameter " + m.parameter_names[i] + " is not in the effect registry");
+    const dem::EffectParameter& p = m.parameters[i];
     optimise::ParameterSpec s;
     s.name = m.parameter_names[i];
-    s.lower = p->search_min;
+    s.lower = p.search_min;
     std::map<std::string, double> caps = best;
     for (const auto& [name, lower] : narrowed_lower) caps[name] = lower;
-    s.upper = std::min(p->search_max, friction_cap(s.name, caps));
-    s.scale = p->log_scale ? optimise::ParameterSpec::Scale::log10 : optimise::ParameterSpec::Scale::linear;
-    if (!(s.upper > s.lower)) s.lower = s.upper - 0.5 * (p->search_max - p->search_min);
+    s.upper = std::min(p.search_max, friction_cap(s.name, caps));
+    s.scale = p.log_scale ? optimise::ParameterSpec::Scale::log10 : optimise::ParameterSpec::Scale::linear;
+    if (!(s.upper > s.lower)) s.lower = s.upper - 0.5 * (p.search_max - p.search_min);
     space.add(s);
   }
   for (const auto& [name, value] : config.space.fixed_parameters()) space.fix(name, value);
@@ -497,8 +504,7 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
 std::string finding(const EffectCandidate& c, const std::map<std::string, double>& base) {
   auto value = [&](const std::string& field, double* out) {
     for (const auto& [k, v] : c.params) {
-      const auto dot = k.rfind('.');
-      if ((dot == std::string::npos ? k : k.substr(dot + 1)) == field && base.find(k) == base.end()) {
+      if (parameter_field(k) == field && base.find(k) == base.end()) {
         *out = v;
         return true;
       }
@@ -563,8 +569,8 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
   const long runs_per_trial = static_cast<long>(fitted.cases.size());
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
     const std::string& name = m.parameter_names[i];
-    if (!m.parameters[i] || !best.count(name)) continue;
-    const auto values = bound_trial_values(*m.parameters[i], best.at(name), friction_cap(name, best));
+    if (!best.count(name)) continue;
+    const auto values = bound_trial_values(m.parameters[i], best.at(name), friction_cap(name, best));
     if (options.max_simulations > 0 &&
         runner.simulations() + runs_per_trial * static_cast<long>(values.size()) > options.max_simulations)
       return;  // over the budget: the remaining parameters stay unchecked
@@ -793,6 +799,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     const auto sensitivities = base_sensitivities(fitted, base_params, base.residuals, runner);
     std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> best probe's parameters
     const dem::Scene first_scene = build_scene(config.cases.front().scene, config.source + ": cases[0].scene");
+    const dem::ResponseScales scales = response_scales(base, options);
+    if (scales.peak_normal_stress > 0) d.peak_normal_stress = scales.peak_normal_stress;
     for (const auto* e : effects) {
       EffectCandidate best_target;
       best_target.effect = e->name;
@@ -803,13 +811,17 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.target = targets.empty() ? "" : targets.front();
         ExtendedModel m;
         try {
-          m = extend(config, *e, targets, fs::path(options.output) / "candidates" / (e->name + (c.target.empty() ? "" : "@" + c.target)));
+          m = extend(config, *e, targets, scales, fs::path(options.output) / "candidates" / (e->name + (c.target.empty() ? "" : "@" + c.target)));
         } catch (const std::exception& ex) {
           c.reason = std::string("not applicable here: ") + ex.what();
           c.signature_score = -1;
           if (best_target.signature_score < 0 && best_target.reason.empty()) best_target = c;
           continue;
         }
+        for (std::size_t i = 0; i < m.parameter_names.size(); ++i)
+          c.search_ranges[m.parameter_names[i]] = {
+              m.parameters[i].search_min,
+              std::min(m.parameters[i].search_max, friction_cap(m.parameter_names[i], base_params))};
         std::vector<std::vector<double>> signatures;
         std::map<std::string, double> warm;  // the probe closest to the measurement starts the search
         double warm_error = std::numeric_limits<double>::infinity();
@@ -952,6 +964,9 @@ json Diagnosis::to_json() const {
                      {"held_out_rms", params_json(c.held_out_rms)}});
     cands.back()["error"] = finite_or_null(c.error);
     cands.back()["held_out_error"] = finite_or_null(c.held_out_error);
+    json ranges = json::object();
+    for (const auto& [name, range] : c.search_ranges) ranges[name] = {range[0], range[1]};
+    cands.back()["search_ranges"] = ranges;
     if (!c.bounds.empty()) {
       json bounds = json::object();
       for (const auto& b : c.bounds) bounds[b.name] = b.to_json();
@@ -968,6 +983,7 @@ json Diagnosis::to_json() const {
           {"verdict", verdict},
           {"error_before", finite_or_null(error_before)},
           {"error_after", finite_or_null(error_after)},
+          {"peak_normal_stress", finite_or_null(peak_normal_stress)},
           {"held_out", {{"rms", params_json(held_out_rms)}, {"noise", params_json(held_out_noise)},
                         {"error", finite_or_null(held_out_error)}, {"checks", held_out_checked}}},
           {"simulations", simulations},

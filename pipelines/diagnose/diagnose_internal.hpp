@@ -10,6 +10,10 @@ namespace demcal::pipelines::detail {
 // A number in a verdict or report: `digits` significant digits, shortest form (3 -> "0.000139").
 std::string format_number(double v, int digits = 3);
 
+// The field of a set_parameter name without its group or block: "arch_joints.closure_max" ->
+// "closure_max"; a bare name is its own field.
+std::string parameter_field(const std::string& name);
+
 // report.md and its figures (diagnose_report.cpp).
 void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 

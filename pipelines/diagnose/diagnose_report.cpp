@@ -2,6 +2,8 @@
 // the table of candidate effects.
 #include "demcal/pipelines/diagnose.hpp"
 #include "diagnose_internal.hpp"
+
+#include "demcal/dem/effects.hpp"
 #include "demcal/pipelines/report.hpp"
 
 #include <algorithm>
@@ -126,6 +128,20 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
     md << "### " << c.effect << ": best set\n\n| parameter | value |\n|---|---|\n";
     for (const auto& [k, v] : c.params) md << "| " << k << " | " << num(v, 4) << " |\n";
     md << "\n";
+    if (!c.search_ranges.empty()) {
+      md << "Searched:";
+      const dem::Effect& effect = dem::find_effect(c.effect);
+      for (const auto& [k, range] : c.search_ranges) {
+        md << " " << k << " " << num(range[0]) << " to " << num(range[1]);
+        for (const auto& p : effect.parameters)
+          if (p.name == detail::parameter_field(k) && p.search_scale == dem::SearchScale::peak_normal_stress && std::isfinite(d.peak_normal_stress))
+            md << " (" << num(p.scaled_min) << " to " << num(p.scaled_max)
+               << " x the largest contact stress of the base fit, " << num(d.peak_normal_stress) << " Pa)";
+        md << ";";
+      }
+      md.seekp(-1, std::ios_base::cur);
+      md << ".\n\n";
+    }
     if (c.bounds.empty()) continue;
     md << "How tightly the data pin the effect's parameters: each moved alone, the others at the best set; a value "
           "is ruled out when the criterion rises by more than " << num(options.evidence_threshold)

@@ -173,8 +173,10 @@ double information_criterion_change(const std::vector<ChannelResidual>& base, co
     const double rss_base = base[c].rms * base[c].rms, rss_ext = extended[c].rms * extended[c].rms;
     const double n_eff = extended[c].effective_points;
     total_effective += n_eff;
-    // A perfect fit on either side would make the logarithm infinite: floor at a millionth of the other.
-    const double floor = 1e-12 * std::max(rss_base, rss_ext) + 1e-300;
+    // Within the measurement noise a channel tells nothing: each side counts at least the noise's
+    // variance (and at least 1e-12 of the other, so that a perfect fit keeps the logarithm finite).
+    const double noise = std::isfinite(base[c].noise) ? base[c].noise * base[c].noise : 0.0;
+    const double floor = std::max(noise, 1e-12 * std::max(rss_base, rss_ext) + 1e-300);
     change += n_eff * std::log(std::max(rss_ext, floor) / std::max(rss_base, floor));
   }
   return change + extra_parameters * std::log(std::max(total_effective, 1.0));
@@ -237,6 +239,11 @@ ParameterBound bound_from_trials(const std::string& name, double best, std::vect
   }
   b.trials = std::move(trials);
   return b;
+}
+
+std::string detail::parameter_field(const std::string& name) {
+  const auto dot = name.rfind('.');
+  return dot == std::string::npos ? name : name.substr(dot + 1);
 }
 
 std::string detail::format_number(double v, int digits) {

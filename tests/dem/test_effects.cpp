@@ -98,6 +98,10 @@ TEST(JointClosure, PressedBlockFollowsTheHyperbola) {
     ++checked;
   }
   EXPECT_GT(checked, 100);
+  // The largest contact stress reported is the joint's uniform stress at the end of the travel.
+  EXPECT_NEAR(r.max_normal_stress, r.peak_force / kArea, 0.01 * r.peak_force / kArea);
+  EXPECT_EQ(r.joints.size(), 1u);
+  EXPECT_EQ(r.joints.front().max_normal_stress, r.max_normal_stress);
   // Against the linear law at the same travel: the stiffened joint carries far more.
   const Recording plain = simulate(pressed(0.9 * dmax));
   EXPECT_GT(r.peak_force, 3 * plain.peak_force);
@@ -202,6 +206,7 @@ TEST(CrushingCap, ForceCappedAtStrengthTimesAreaThenFalling) {
   const Recording p = simulate(flat);
   ASSERT_EQ(p.status, RunStatus::completed) << p.message;
   EXPECT_NEAR(p.force.back(), fc * kArea, 0.01 * fc * kArea);
+  EXPECT_NEAR(p.max_normal_stress, fc, 1e-6 * fc);  // the capped stress, not the elastic trial's
 }
 
 TEST(SupportCompliance, SupportMovesByThrustOverSpringStiffness) {
@@ -423,6 +428,28 @@ TEST(EffectRegistry, EveryEffectSwitchesOnAndRunsTheReferenceArch) {
   EXPECT_EQ(get_parameter(s, "arch_joints.closure_max"), 0);
   EXPECT_THROW(enable_effect(s, "joint-gap"), SceneError);
   EXPECT_THROW(enable_effect(s, "support-compliance", {"voussoir_2"}), SceneError);
+}
+
+TEST(EffectRegistry, CompressiveStrengthIsSearchedBelowTheLargestContactStress) {
+  const EffectParameter& strength = find_effect("crushing-cap").parameters.front();
+  ASSERT_EQ(strength.name, "compressive_strength");
+  ASSERT_EQ(strength.search_scale, SearchScale::peak_normal_stress);
+  ResponseScales scales;
+  scales.peak_normal_stress = 1.75e6;
+  const EffectParameter scaled = scaled_search_range(strength, scales);
+  EXPECT_DOUBLE_EQ(scaled.search_min, strength.scaled_min * 1.75e6);
+  EXPECT_DOUBLE_EQ(scaled.search_max, strength.scaled_max * 1.75e6);
+  EXPECT_LT(scaled.search_min, 1.75e6);  // the range brackets the stress reached
+  EXPECT_GT(scaled.search_max, 1.75e6);
+  // Unknown scale: the absolute range stays.
+  EXPECT_EQ(scaled_search_range(strength, ResponseScales{}).search_min, strength.search_min);
+  EXPECT_EQ(scaled_search_range(strength, ResponseScales{}).search_max, strength.search_max);
+  // Clipped to the physical bounds.
+  scales.peak_normal_stress = 1e12;
+  EXPECT_EQ(scaled_search_range(strength, scales).search_max, strength.upper_bound);
+  // A parameter without a scale is unchanged.
+  const EffectParameter& softening = find_effect("crushing-cap").parameters.back();
+  EXPECT_EQ(scaled_search_range(softening, scales).search_max, softening.search_max);
 }
 
 std::pair<int, std::string> run_demcal(const std::string& args) {

@@ -103,6 +103,24 @@ TEST(Evidence, InformationCriterionRewardsStructureAndPenalisesParameters) {
   EXPECT_GT(information_criterion_change({almost}, {right}, 2), 0);
 }
 
+TEST(Evidence, AChannelWithinItsNoiseIsNeitherForNorAgainst) {
+  auto channel = [](double rms) {
+    ChannelResidual c;
+    c.rms = rms;
+    c.noise = 20;
+    c.effective_points = 4;
+    return c;
+  };
+  // inside the noise on both sides (a rigid support's gauge, say): no change at all
+  EXPECT_EQ(information_criterion_change({channel(4)}, {channel(15)}, 0), 0);
+  EXPECT_EQ(information_criterion_change({channel(15)}, {channel(4)}, 0), 0);
+  // an improvement counts down to the noise, not below it; a loss from the noise up counts in full
+  EXPECT_DOUBLE_EQ(information_criterion_change({channel(30)}, {channel(5)}, 0), 4 * std::log(20.0 * 20 / (30 * 30)));
+  EXPECT_DOUBLE_EQ(information_criterion_change({channel(5)}, {channel(40)}, 0), 4 * std::log(40.0 * 40 / (20 * 20)));
+  // so a clear gain on one channel is not undone by a change within the noise on another
+  EXPECT_LT(information_criterion_change({channel(200), channel(4)}, {channel(25), channel(15)}, 2), -10);
+}
+
 TEST(Evidence, SignatureScoreNeedsTheRightShapeAndSign) {
   const int n = 300;
   std::vector<double> j1(n), s(n), other(n), residual(n), wrong(n);
@@ -399,7 +417,7 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
     EXPECT_NE(text.find("--held-out"), std::string::npos) << text;
   }
   EXPECT_NE(text.find("every case"), std::string::npos) << text;
-  ASSERT_EQ(std::system((base + " --held-out check --effects support-compliance --candidates 1 --candidate-simulations 8 > /dev/null 2>&1").c_str()), 0);
+  ASSERT_EQ(std::system((base + " --held-out check --effects support-compliance,crushing-cap --candidates 1 --candidate-simulations 8 > /dev/null 2>&1").c_str()), 0);
   const json d = test_support::read_json(dir / "out" / "diagnosis.json");
   EXPECT_TRUE(d["chosen"].is_array());
   EXPECT_TRUE(d["error_before"].is_number());
@@ -420,4 +438,29 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
       EXPECT_TRUE(c["held_out_rms"].contains("check/load_vertical")) << c.dump();
     }
   EXPECT_EQ(tried, 1);
+  // Search ranges: the supports' from the registry; the compressive strength's from the largest
+  // contact stress the base fit reaches (a cap above it never acts), probed and reported.
+  ASSERT_TRUE(d["peak_normal_stress"].is_number()) << d.dump();
+  const double stress = d["peak_normal_stress"].get<double>();
+  EXPECT_GT(stress, 1e5);
+  EXPECT_LT(stress, 1e8);
+  const dem::EffectParameter& strength = dem::find_effect("crushing-cap").parameters.front();
+  const dem::EffectParameter& kx = dem::find_effect("support-compliance").parameters.front();
+  for (const auto& c : d["candidates"]) {
+    const auto& ranges = c["search_ranges"];
+    if (c["effect"] == "crushing-cap") {
+      EXPECT_GT(c["signature_score"].get<double>(), -1) << c.dump();
+      EXPECT_NEAR(ranges["compressive_strength"][0].get<double>(), strength.scaled_min * stress, 1e-9 * stress);
+      EXPECT_NEAR(ranges["compressive_strength"][1].get<double>(), strength.scaled_max * stress, 1e-9 * stress);
+    } else {
+      int springs = 0;  // "<the support block>.support_kx"
+      for (const auto& [name, range] : ranges.items())
+        if (name.ends_with(".support_kx")) {
+          ++springs;
+          EXPECT_EQ(range[0].get<double>(), kx.search_min) << name;
+          EXPECT_EQ(range[1].get<double>(), kx.search_max) << name;
+        }
+      EXPECT_EQ(springs, 1) << c.dump();
+    }
+  }
 }

@@ -12,6 +12,14 @@
 
 namespace demcal::dem {
 
+// What a parameter's search range is relative to. A material strength only matters against the
+// stresses the structure reaches: a compressive strength above the largest contact stress never
+// acts, whatever the structure, so its range is written as fractions of that stress.
+enum class SearchScale {
+  absolute,            // search_min..search_max as written
+  peak_normal_stress,  // scaled_min..scaled_max x the largest normal stress at a contact node (Pa)
+};
+
 // One numeric parameter of an effect, named as set_parameter's field ("closure_max").
 struct EffectParameter {
   std::string name;
@@ -23,7 +31,21 @@ struct EffectParameter {
   double search_max = 0;
   bool log_scale = false;     // search on log10 (ranges spanning decades)
   double default_value = 0;   // the value enable_effect sets
+  // Optional structure-relative range (see SearchScale); search_min..search_max stay the fallback
+  // where the scale is unknown.
+  SearchScale search_scale = SearchScale::absolute;
+  double scaled_min = 0;
+  double scaled_max = 0;
 };
+
+// The response of a structure, from a run of its model, that scaled search ranges refer to; 0 = unknown.
+struct ResponseScales {
+  double peak_normal_stress = 0;  // Pa, Recording::max_normal_stress
+};
+
+// `p` with its search range resolved for a structure: scaled_min..scaled_max x the scale when the
+// parameter has one and the scale is known (> 0), clipped to the physical bounds; else `p` unchanged.
+EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScales& scales);
 
 // What an effect attaches to, and so what enable_effect's `targets` name.
 enum class EffectTarget {

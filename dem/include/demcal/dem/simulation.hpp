@@ -41,6 +41,7 @@ struct JointReport {
   double open_fraction = 0;   // share of the joint's nodes open (gap > 0) at the end
   double rotation = 0;        // relative rotation of the two blocks since zeroing (rad)
   double slip = 0;            // accumulated plastic (sliding) slip along the joint since zeroing (m)
+  double max_normal_stress = 0;  // Pa, largest normal stress at a node of the joint in a recorded row
   // Dominant joints of the mechanism: hinge when open_fraction >= 0.25 and |rotation| >= max(1e-3 rad,
   // a quarter of the run's largest joint rotation); sliding when slip >= max(0.2 mm, a quarter of
   // the largest slip).
@@ -65,6 +66,9 @@ struct Recording {
   double time_step = 0;               // s
   double wall_time_s = 0;
   double max_block_displacement = 0;  // m, largest centroid displacement of a free block (from start)
+  // Pa, largest normal stress at any contact node in a recorded row (the loading stage): the scale
+  // against which a compressive strength matters (a cap above it never acts).
+  double max_normal_stress = 0;
   long contact_point_updates = 0;     // contact-node force evaluations, for speed figures
   std::vector<JointReport> joints;
   std::vector<std::string> hinges;          // names of joints with hinge = true

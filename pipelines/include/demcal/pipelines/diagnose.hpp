@@ -37,6 +37,7 @@
 
 #include <cmath>
 #include <limits>
+#include <array>
 #include <map>
 #include <string>
 #include <vector>
@@ -104,8 +105,10 @@ double lag1_autocorrelation(const std::vector<double>& values);
 
 // Change of the Bayesian information criterion from a base fit to an extended one, both measured on
 // the same channels: sum_c n_eff,c ln(RSS_ext,c / RSS_base,c) + extra_parameters ln(sum_c n_eff,c),
-// with each channel's effective points taken from the extended fit's residual. Negative = evidence
-// for the extension; below -10 is "very strong" on the usual scale (Kass and Raftery 1995).
+// with each channel's effective points taken from the extended fit's residual and each RSS (mean
+// square) floored at the channel's noise variance: a channel fitted within its noise counts as at
+// the noise, so moving about inside it is neither evidence for nor against a model. Negative =
+// evidence for the extension; below -10 is "very strong" on the usual scale (Kass and Raftery 1995).
 double information_criterion_change(const std::vector<ChannelResidual>& base,
                                     const std::vector<ChannelResidual>& extended, int extra_parameters);
 
@@ -222,6 +225,9 @@ struct EffectCandidate {
   std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
   std::vector<ParameterBound> bounds;      // of the effect's parameters, when accepted or tied
+  // effect parameter -> {lowest, highest} value the signature and the calibration search: the
+  // registry's range, or for a structure-relative one (dem::SearchScale) that of this structure
+  std::map<std::string, std::array<double, 2>> search_ranges;
 };
 
 struct Diagnosis {
@@ -240,6 +246,8 @@ struct Diagnosis {
   std::string verdict;                     // the conclusion in words
   double error_before = kNaN;              // RMS force error over all channels, N
   double error_after = kNaN;
+  double peak_normal_stress = kNaN;        // Pa, largest contact stress of the base best run over the
+                                           // fitted cases (scales the compressive strength's range)
   std::map<std::string, double> held_out_rms;  // base fit on the data not fitted, "<case>/<channel>" -> N
   std::map<std::string, double> held_out_noise;
   double held_out_error = kNaN;            // the base fit's RMS force error there, N (NaN: no such data)
