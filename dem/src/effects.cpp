@@ -83,8 +83,10 @@ EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScal
   EffectParameter out = p;
   if (p.search_scale == SearchScale::peak_normal_stress && scales.peak_normal_stress > 0 &&
       std::isfinite(scales.peak_normal_stress)) {
-    out.search_min = std::clamp(p.scaled_min * scales.peak_normal_stress, p.lower_bound, p.upper_bound);
+    const double start = std::isfinite(scales.start_normal_stress) ? scales.start_normal_stress : 0.0;
     out.search_max = std::clamp(p.scaled_max * scales.peak_normal_stress, p.lower_bound, p.upper_bound);
+    out.search_min = std::clamp(std::max(p.scaled_min * scales.peak_normal_stress, start), p.lower_bound, p.upper_bound);
+    if (!(out.search_min < out.search_max)) out.search_min = out.search_max * p.scaled_min / p.scaled_max;
   }
   return out;
 }

@@ -25,6 +25,7 @@ json summary_json(const Recording& r) {
           {"wall_time_s", r.wall_time_s},
           {"max_block_displacement", r.max_block_displacement},
           {"max_normal_stress", r.max_normal_stress},
+          {"start_normal_stress", r.start_normal_stress},
           {"contact_point_updates", r.contact_point_updates},
           {"rows", r.time.size()},
           {"hinges", r.hinges},

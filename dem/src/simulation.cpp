@@ -1055,6 +1055,7 @@ void Engine::record_row(double load_time, double force) {
   }
   // Normal stress at each node from its last gap, through the group's closure law (the elastic
   // closure: penetration less any plastic closure after crushing).
+  double row_max = 0;
   for (Contact& c : contacts_) {
     if (!c.active) continue;
     const EffectLaw& law = groups_[c.group].effects;
@@ -1062,7 +1063,9 @@ void Engine::record_row(double load_time, double force) {
       const double elastic = -c.gap[k] - (k < c.history.size() ? c.history[k].plastic_closure : 0.0);
       if (elastic > 0) c.max_normal_stress = std::max(c.max_normal_stress, law.normal_stress(elastic));
     }
+    row_max = std::max(row_max, c.max_normal_stress);
   }
+  if (rec_.time.size() == 1) rec_.start_normal_stress = row_max;
 }
 
 Recording Engine::run(const RunControl& control) {

@@ -44,6 +44,7 @@ SimulationOutcome outcome_from_recording(const dem::Recording& rec) {
   d["time_step"] = rec.time_step;
   d["max_block_displacement"] = rec.max_block_displacement;
   d["max_normal_stress"] = rec.max_normal_stress;
+  d["start_normal_stress"] = rec.start_normal_stress;
   d["hinges"] = rec.hinges;
   d["sliding_joints"] = rec.sliding_joints;
   nlohmann::json joints = nlohmann::json::array();

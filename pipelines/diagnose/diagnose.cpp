@@ -270,12 +270,17 @@ dem::EffectParameter registry_parameter(const dem::Effect& effect, const std::st
 }
 
 // What the base best run reached, for the structure-relative search ranges: the largest contact
-// stress over the fitted cases (0 when a backend does not report it).
+// stress over the fitted cases, in the run and at its start (0 when a backend does not report them).
 dem::ResponseScales response_scales(const Evaluation& base, const DiagnoseOptions& options) {
   dem::ResponseScales s;
+  auto largest = [](const json& details, const char* key, double& into) {
+    if (details.contains(key) && details[key].is_number()) into = std::max(into, details[key].get<double>());
+  };
   for (const auto& c : base.cases)
-    if (!is_held_out(c.name, options.held_out_cases) && c.details.contains("max_normal_stress") && c.details["max_normal_stress"].is_number())
-      s.peak_normal_stress = std::max(s.peak_normal_stress, c.details["max_normal_stress"].get<double>());
+    if (!is_held_out(c.name, options.held_out_cases)) {
+      largest(c.details, "max_normal_stress", s.peak_normal_stress);
+      largest(c.details, "start_normal_stress", s.start_normal_stress);
+    }
   return s;
 }
 
@@ -801,6 +806,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     const dem::Scene first_scene = build_scene(config.cases.front().scene, config.source + ": cases[0].scene");
     const dem::ResponseScales scales = response_scales(base, options);
     if (scales.peak_normal_stress > 0) d.peak_normal_stress = scales.peak_normal_stress;
+    if (scales.start_normal_stress > 0) d.start_normal_stress = scales.start_normal_stress;
     for (const auto* e : effects) {
       EffectCandidate best_target;
       best_target.effect = e->name;
@@ -984,6 +990,7 @@ json Diagnosis::to_json() const {
           {"error_before", finite_or_null(error_before)},
           {"error_after", finite_or_null(error_after)},
           {"peak_normal_stress", finite_or_null(peak_normal_stress)},
+          {"start_normal_stress", finite_or_null(start_normal_stress)},
           {"held_out", {{"rms", params_json(held_out_rms)}, {"noise", params_json(held_out_noise)},
                         {"error", finite_or_null(held_out_error)}, {"checks", held_out_checked}}},
           {"simulations", simulations},

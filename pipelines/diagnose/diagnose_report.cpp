@@ -136,7 +136,8 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
         for (const auto& p : effect.parameters)
           if (p.name == detail::parameter_field(k) && p.search_scale == dem::SearchScale::peak_normal_stress && std::isfinite(d.peak_normal_stress))
             md << " (" << num(p.scaled_min) << " to " << num(p.scaled_max)
-               << " x the largest contact stress of the base fit, " << num(d.peak_normal_stress) << " Pa)";
+               << " x the largest contact stress of the base fit, " << num(d.peak_normal_stress)
+               << " Pa, and not below the largest at the start of loading, " << num(d.start_normal_stress) << " Pa)";
         md << ";";
       }
       md.seekp(-1, std::ios_base::cur);

@@ -100,6 +100,7 @@ TEST(JointClosure, PressedBlockFollowsTheHyperbola) {
   EXPECT_GT(checked, 100);
   // The largest contact stress reported is the joint's uniform stress at the end of the travel.
   EXPECT_NEAR(r.max_normal_stress, r.peak_force / kArea, 0.01 * r.peak_force / kArea);
+  EXPECT_LT(r.start_normal_stress, 0.02 * r.max_normal_stress);  // the first row: barely touched
   EXPECT_EQ(r.joints.size(), 1u);
   EXPECT_EQ(r.joints.front().max_normal_stress, r.max_normal_stress);
   // Against the linear law at the same travel: the stiffened joint carries far more.
@@ -441,6 +442,13 @@ TEST(EffectRegistry, CompressiveStrengthIsSearchedBelowTheLargestContactStress) 
   EXPECT_DOUBLE_EQ(scaled.search_max, strength.scaled_max * 1.75e6);
   EXPECT_LT(scaled.search_min, 1.75e6);  // the range brackets the stress reached
   EXPECT_GT(scaled.search_max, 1.75e6);
+  // Never below the stress at the start of loading (the structure would crush before the test).
+  scales.start_normal_stress = 0.5e6;
+  EXPECT_DOUBLE_EQ(scaled_search_range(strength, scales).search_min, 0.5e6);
+  EXPECT_DOUBLE_EQ(scaled_search_range(strength, scales).search_max, scaled.search_max);
+  scales.start_normal_stress = 1e3;  // below the scaled minimum: no effect
+  EXPECT_DOUBLE_EQ(scaled_search_range(strength, scales).search_min, scaled.search_min);
+  scales.start_normal_stress = 0;
   // Unknown scale: the absolute range stays.
   EXPECT_EQ(scaled_search_range(strength, ResponseScales{}).search_min, strength.search_min);
   EXPECT_EQ(scaled_search_range(strength, ResponseScales{}).search_max, strength.search_max);

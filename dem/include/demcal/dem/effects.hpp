@@ -17,7 +17,9 @@ namespace demcal::dem {
 // acts, whatever the structure, so its range is written as fractions of that stress.
 enum class SearchScale {
   absolute,            // search_min..search_max as written
-  peak_normal_stress,  // scaled_min..scaled_max x the largest normal stress at a contact node (Pa)
+  peak_normal_stress,  // scaled_min..scaled_max x the largest normal stress at a contact node (Pa),
+                       // never below the largest one at the start of loading (a strength below it
+                       // crushes the structure under its weight and pre-compression before the test)
 };
 
 // One numeric parameter of an effect, named as set_parameter's field ("closure_max").
@@ -40,11 +42,12 @@ struct EffectParameter {
 
 // The response of a structure, from a run of its model, that scaled search ranges refer to; 0 = unknown.
 struct ResponseScales {
-  double peak_normal_stress = 0;  // Pa, Recording::max_normal_stress
+  double peak_normal_stress = 0;   // Pa, Recording::max_normal_stress
+  double start_normal_stress = 0;  // Pa, Recording::start_normal_stress
 };
 
-// `p` with its search range resolved for a structure: scaled_min..scaled_max x the scale when the
-// parameter has one and the scale is known (> 0), clipped to the physical bounds; else `p` unchanged.
+// `p` with its search range resolved for a structure (see SearchScale) when the parameter has a
+// scale and the scale is known (> 0), clipped to the physical bounds; else `p` unchanged.
 EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScales& scales);
 
 // What an effect attaches to, and so what enable_effect's `targets` name.

@@ -69,6 +69,8 @@ struct Recording {
   // Pa, largest normal stress at any contact node in a recorded row (the loading stage): the scale
   // against which a compressive strength matters (a cap above it never acts).
   double max_normal_stress = 0;
+  // Pa, the same in the first recorded row (the start of loading: self-weight and pre-compression).
+  double start_normal_stress = 0;
   long contact_point_updates = 0;     // contact-node force evaluations, for speed figures
   std::vector<JointReport> joints;
   std::vector<std::string> hinges;          // names of joints with hinge = true

@@ -248,6 +248,7 @@ struct Diagnosis {
   double error_after = kNaN;
   double peak_normal_stress = kNaN;        // Pa, largest contact stress of the base best run over the
                                            // fitted cases (scales the compressive strength's range)
+  double start_normal_stress = kNaN;       // Pa, the same at the start of loading (its lower end)
   std::map<std::string, double> held_out_rms;  // base fit on the data not fitted, "<case>/<channel>" -> N
   std::map<std::string, double> held_out_noise;
   double held_out_error = kNaN;            // the base fit's RMS force error there, N (NaN: no such data)
