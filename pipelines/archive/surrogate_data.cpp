@@ -23,7 +23,14 @@ Eigen::VectorXd archived_outputs(const RunArchive& archive, const std::vector<st
     if (!cases[k].grid) return {};
     const auto run = archive.run(run_ids[k]);
     if (!run) return {};
-    parts.push_back(curve_outputs(run->curves, *cases[k].grid));
+    // scored as the campaign scored it: a collapsed run carries nothing after its collapse
+    std::map<std::string, double> ends;
+    for (const auto& c : cases[k].grid->channels) ends[c.column] = c.upper;
+    smoothing::ObjectiveOptions columns;
+    columns.force_column = cases[k].grid->force_column;
+    parts.push_back(curve_outputs(run->status == "collapsed" ? smoothing::continued_after_collapse(run->curves, ends, columns)
+                                                             : run->curves,
+                                  *cases[k].grid));
     if (parts.back().size() == 0) return {};
     total += parts.back().size();
   }

@@ -3,6 +3,7 @@
 #include "demcal/pipelines/surrogate_data.hpp"
 
 #include "demcal/pipelines/mpi.hpp"
+#include "demcal/pipelines/predict.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -141,13 +142,15 @@ FitnessRecord compute_fitness(std::int64_t run_id, const std::string& status, co
   if (!usable_status(status) || curves.rows() < 2) return f;
   const auto start = std::chrono::steady_clock::now();
   try {
-    const auto r = smoothing::objective1(prepared.measured[case_index], curves, config.objective_options);
+    const smoothing::Curve& measured = prepared.measured[case_index];
+    const smoothing::Curve scored = scored_curve(status, curves, measured, config.objective_options);
+    const auto r = smoothing::objective1(measured, scored, config.objective_options);
     f.objective1 = r.fitness;
     if (config.objective == 1) {
       f.fitness = r.fitness;
       f.channels = r.channels;
     } else {
-      const auto r2 = prepared.objective2[case_index]->evaluate(curves);
+      const auto r2 = prepared.objective2[case_index]->evaluate(scored);
       f.objective2 = r2.fitness;
       f.fitness = r2.fitness;
       f.channels = r2.channels;

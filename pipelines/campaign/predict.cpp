@@ -34,7 +34,7 @@ std::pair<double, double> peak_in_window(const smoothing::XYSeries& s, double lo
 }
 
 void compare(const smoothing::Curve& measured, CasePrediction& p, const smoothing::ObjectiveOptions& options) {
-  const auto result = smoothing::objective1(measured, p.simulated, options);
+  const auto result = smoothing::objective1(measured, scored_curve(p.status, p.simulated, measured, options), options);
   p.fitness = result.fitness;
   p.channels = result.channels;
   double sum_squares = 0;
@@ -161,6 +161,12 @@ std::vector<CasePrediction> predict_cases(const CampaignConfig& config, const st
         }
       });
   return out;
+}
+
+smoothing::Curve scored_curve(const std::string& status, const smoothing::Curve& simulated,
+                              const smoothing::Curve& measured, const smoothing::ObjectiveOptions& options) {
+  if (status != "collapsed") return simulated;
+  return smoothing::continued_after_collapse(simulated, smoothing::envelope_ends(measured, options), options);
 }
 
 json prediction_json(const std::map<std::string, double>& params, const std::vector<CasePrediction>& cases) {

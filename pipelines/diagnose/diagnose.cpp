@@ -141,11 +141,12 @@ class CaseRunner {
         return e;
       }
       const smoothing::Curve& measured = found->second;
-      const auto channels = smoothing::common_channels(measured, p.simulated, config.objective_options);
+      const smoothing::Curve simulated = scored_curve(p.status, p.simulated, measured, config.objective_options);
+      const auto channels = smoothing::common_channels(measured, simulated, config.objective_options);
       const bool case_held_out = is_held_out(p.name, held_out_cases_);
       for (const auto& ch : channels) {
         const auto weight = config.objective_options.channel_weights.find(ch);
-        const auto sim = smoothing::series(p.simulated, ch, config.objective_options.force_column);
+        const auto sim = smoothing::series(simulated, ch, config.objective_options.force_column);
         if (case_held_out || (weight != config.objective_options.channel_weights.end() && weight->second == 0)) {
           // not fitted: a check of the fit, on its own grid
           try {

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -103,6 +104,48 @@ std::vector<std::string> displacement_columns(const Curve& curve, const Objectiv
         options.ignored_columns.end())
       continue;
     out.push_back(c.name);
+  }
+  return out;
+}
+
+std::map<std::string, double> envelope_ends(const Curve& curve, const ObjectiveOptions& options) {
+  std::map<std::string, double> ends;
+  for (const auto& column : displacement_columns(curve, options)) {
+    const XYSeries e = loading_envelope(series(curve, column, options.force_column));
+    if (e.x.size() >= 2) ends[column] = e.x.back();
+  }
+  return ends;
+}
+
+Curve continued_after_collapse(const Curve& simulation, const std::map<std::string, double>& ends,
+                               const ObjectiveOptions& options) {
+  Curve out = simulation;
+  if (out.rows() == 0) return out;
+  const auto displacements = displacement_columns(out, options);
+  auto is_displacement = [&](const std::string& name) {
+    return std::find(displacements.begin(), displacements.end(), name) != displacements.end();
+  };
+  bool further = false;
+  std::vector<double> at_collapse, at_end;
+  for (const auto& c : out.columns) {
+    double value = c.values.back();  // other columns (time, ignored ones) keep their last value
+    if (c.name == options.force_column) {
+      value = 0;
+    } else if (is_displacement(c.name)) {
+      value = -std::numeric_limits<double>::infinity();
+      for (double v : c.values)
+        if (std::isfinite(v)) value = std::max(value, v);
+      if (!std::isfinite(value)) value = c.values.back();
+    }
+    at_collapse.push_back(value);
+    const auto end = ends.find(c.name);
+    const bool beyond = is_displacement(c.name) && end != ends.end() && end->second > value;
+    further = further || beyond;
+    at_end.push_back(beyond ? end->second : value);
+  }
+  for (std::size_t k = 0; k < out.columns.size(); ++k) {
+    out.columns[k].values.push_back(at_collapse[k]);
+    if (further) out.columns[k].values.push_back(at_end[k]);
   }
   return out;
 }

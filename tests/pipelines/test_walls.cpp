@@ -165,6 +165,24 @@ TEST(Walls, TinyCampaignOnOneWallRunsEndToEndAndPredictReproducesItsBestFitness)
   EXPECT_DOUBLE_EQ(j["cases"][0]["fitness"].get<double>(), p.fitness);
 }
 
+TEST(Walls, ACollapsedRunIsScoredOverTheWholeMeasuredCurve) {
+  namespace smoothing = demcal::smoothing;
+  // A run that collapsed after 1 mm of a 4 mm test, matching the test up to there: compared on the
+  // shared millimetre alone it would score perfectly; it carries nothing after its collapse.
+  auto curve = [](std::vector<double> x, std::vector<double> f) {
+    smoothing::Curve c;
+    c.columns = {{"time", "s", x}, {"force", "N", f}, {"top_horizontal", "m", x}};
+    return c;
+  };
+  const smoothing::Curve measured = curve({0, 1e-3, 2e-3, 3e-3, 4e-3}, {0, 1e3, 1e3, 1e3, 1e3});
+  const smoothing::Curve run = curve({0, 1e-3}, {0, 1e3});
+  smoothing::ObjectiveOptions options;
+  options.points = 5;
+  EXPECT_EQ(smoothing::objective1(measured, scored_curve("completed", run, measured, options), options).fitness, 0.0);
+  EXPECT_DOUBLE_EQ(smoothing::objective1(measured, scored_curve("collapsed", run, measured, options), options).fitness, 2e3);
+  EXPECT_EQ(scored_curve("step_limit", run, measured, options).rows(), 2u);
+}
+
 TEST(Walls, PredictRejectsUnknownParametersAndMalformedResults) {
   const auto dir = fresh_dir("bad");
   const CampaignConfig config = tiny_wall_campaign(dir / "out");

@@ -103,3 +103,24 @@ TEST(Objective1, Errors) {
   EXPECT_THROW(o.Validate(), std::invalid_argument);
   EXPECT_THROW(points(1).Validate(), std::invalid_argument);
 }
+
+TEST(Objective1, ACollapsedRunIsContinuedAtZeroForceToTheMeasuredEnd) {
+  // The test holds 1 from w = 1 to 4; the run matches it, then collapses at w = 1.
+  const Curve e = curve("e.csv", {{"time", "s", {0, 1, 2, 3, 4}}, {"force", "", {0, 1, 1, 1, 1}}, {"dv", "", {0, 1, 2, 3, 4}}});
+  const Curve s = curve("s.csv", {{"time", "s", {0, 1}}, {"force", "", {0, 1}}, {"dv", "", {0, 1}}});
+  EXPECT_DOUBLE_EQ(objective1(e, s, points(5)).fitness, 0.0);  // the shared window alone: a perfect score
+  const auto ends = envelope_ends(e);
+  ASSERT_EQ(ends.size(), 1u);
+  EXPECT_EQ(ends.at("dv"), 4.0);
+  const Curve c = continued_after_collapse(s, ends);
+  // zero from the collapse on: w = 0..4 against 0, 1, 1, 1, 1
+  EXPECT_DOUBLE_EQ(objective1(e, c, points(5)).fitness, 2.0);
+  EXPECT_EQ(c.column("time").values, (std::vector<double>{0, 1, 1, 1}));  // other columns keep their last value
+  // A run whose displacement came back before the collapse steps down at its largest displacement.
+  const Curve back = curve("s.csv", {{"force", "", {0, 1, 1}}, {"dv", "", {0, 2, 1}}});
+  const XYSeries env = loading_envelope(series(continued_after_collapse(back, ends), "dv", "force"));
+  EXPECT_EQ(env.x, (std::vector<double>{0, 2, 4}));
+  EXPECT_EQ(env.y, (std::vector<double>{0, 0, 0}));
+  // When the run already reached the measured end only the step is added.
+  EXPECT_EQ(continued_after_collapse(back, {{"dv", 1.5}}).rows(), 4u);
+}

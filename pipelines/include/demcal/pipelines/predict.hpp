@@ -15,6 +15,7 @@
 
 #include "demcal/pipelines/campaign.hpp"
 #include "demcal/smoothing/curve.hpp"
+#include "demcal/smoothing/objective.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -68,6 +69,12 @@ std::map<std::string, double> read_result_parameters(const std::string& result_j
 // name is unknown to a case's scene or a value is not finite.
 std::map<std::string, double> complete_parameters(const CampaignConfig& config,
                                                   const std::map<std::string, double>& params);
+
+// The curve a run is scored with: a collapsed run's continued at zero force to the end of the
+// measured curve (smoothing::continued_after_collapse: it carries nothing after its collapse), any
+// other run's as it is. Campaign fitness, predictions and diagnoses all score through it.
+smoothing::Curve scored_curve(const std::string& status, const smoothing::Curve& simulated,
+                              const smoothing::Curve& measured, const smoothing::ObjectiveOptions& options);
 
 // Simulates every case of `config` with `params` (completed as above) and compares each with its
 // measured curve. A run that fails is a CasePrediction with status "failed" and a message; bad

@@ -61,6 +61,18 @@ double interpolate(const XYSeries& envelope, double x);
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
                       const std::string& label = "channel");
 
+// The largest displacement of each displacement column's loading envelope (column -> x); columns
+// with fewer than 2 envelope points are left out.
+std::map<std::string, double> envelope_ends(const Curve& curve, const ObjectiveOptions& options = {});
+
+// A curve that stops before the end of the test because the structure collapsed, continued at zero
+// force: it carries nothing after its collapse. Two rows are appended: every displacement column at
+// its largest value so far (the envelope's last point, whose force is replaced by 0: a step), then
+// at `ends` (the measured curve's envelope ends) where those lie further. Without it the window of
+// step 2 shrinks to what the run reached, and a run that collapses at once scores well.
+Curve continued_after_collapse(const Curve& simulation, const std::map<std::string, double>& ends,
+                               const ObjectiveOptions& options = {});
+
 // Objective 1 (eqs. 16–20). Throws CurveError on missing force column, no common channel, a weight
 // naming no common channel, non-overlapping windows.
 FitnessResult objective1(const Curve& experiment, const Curve& simulation,
