@@ -35,9 +35,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cmath>
 #include <limits>
-#include <array>
 #include <map>
 #include <string>
 #include <vector>
