@@ -880,6 +880,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       const ExtendedModel& m = models.at(c.effect);
       const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
       const CampaignConfig ext = extended_campaign(m, config, d.base_params, options, budget, folder, warm_starts[c.effect]);
+      for (const auto& p : ext.space.free_parameters())  // the calibration's own box (its residual friction capped lower)
+        if (c.search_ranges.count(p.name)) c.search_ranges[p.name] = {p.lower, p.upper};
       progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations) in " + folder.string());
       ++tried;
       c.tried = true;

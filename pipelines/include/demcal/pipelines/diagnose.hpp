@@ -225,8 +225,10 @@ struct EffectCandidate {
   std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
   std::vector<ParameterBound> bounds;      // of the effect's parameters, when accepted or tied
-  // effect parameter -> {lowest, highest} value the signature and the calibration search: the
-  // registry's range, or for a structure-relative one (dem::SearchScale) that of this structure
+  // effect parameter -> {lowest, highest} value searched: the registry's range, or for a
+  // structure-relative one (dem::SearchScale) that of this structure; the calibration's box when
+  // the effect was calibrated (a residual friction below the lowest friction searched), else the
+  // signature probes' range
   std::map<std::string, std::array<double, 2>> search_ranges;
 };
 
