@@ -60,16 +60,34 @@ struct Body {
   double radius = 0;  // largest vertex distance from the centroid
   Vec2 box_min = Vec2::Zero(), box_max = Vec2::Zero();
 
-  Vec2 to_local(const Vec2& world_point) const {
-    return Eigen::Rotation2Dd(-angle) * (world_point - position);
-  }
-  Vec2 to_world(const Vec2& local_point) const { return position + Eigen::Rotation2Dd(angle) * local_point; }
+  // cos and sin of `angle` (every block starts at angle 0), kept up to date by turn().
+  double cos_angle = 1, sin_angle = 0;
+
+  Eigen::Matrix2d rotation() const { return (Eigen::Matrix2d() << cos_angle, -sin_angle, sin_angle, cos_angle).finished(); }
+  Vec2 to_local(const Vec2& world_point) const { return rotation().transpose() * (world_point - position); }
+  Vec2 to_world(const Vec2& local_point) const { return position + rotation() * local_point; }
   Vec2 velocity_at(const Vec2& world_point) const {
     return velocity + angular_velocity * perp(world_point - position);
   }
+  // Rotates by `increment` (rad): the angle-addition formulas with the increment's sine and cosine
+  // from their Taylor series, exact to round-off for |increment| <= 1e-3 (truncation below 1e-17;
+  // a step turns a block by 1e-7 to 1e-5 rad in the quasi-static runs), instead of a library sincos
+  // per block and step. Larger increments, and every call with `exact`, take the library's values.
+  void turn(double increment, bool exact) {
+    angle += increment;
+    if (exact || std::abs(increment) > 1e-3) {
+      cos_angle = std::cos(angle);
+      sin_angle = std::sin(angle);
+      return;
+    }
+    const double squared = increment * increment;
+    const double c = 1 - 0.5 * squared * (1 - squared / 12), s = increment * (1 - squared / 6);
+    const double cos_new = cos_angle * c - sin_angle * s, sin_new = sin_angle * c + cos_angle * s;
+    cos_angle = cos_new;
+    sin_angle = sin_new;
+  }
   void update_world() {
-    const Eigen::Rotation2Dd r(angle);
-    const Eigen::Matrix2d m = r.toRotationMatrix();
+    const Eigen::Matrix2d m = rotation();
     box_min = Vec2::Constant(std::numeric_limits<double>::infinity());
     box_max = -box_min;
     for (std::size_t i = 0; i < local.size(); ++i) {
@@ -126,51 +144,6 @@ struct GroupLaw {
   bool plain = true;
 };
 
-// What stage 1 of the plain node loop needs of a pair: the reference face (r1, tr, normal), the
-// tangent along which shear acts on the second block, both blocks' velocities and centroids, the
-// wall's width (m) and the time step (s).
-struct NodeFrame {
-  double r1x, r1y, trx, try_, nx, ny, tx, ty;
-  double vax, vay, wa, ax, ay;
-  double vbx, vby, wb, bx, by;
-  double width, dt;
-};
-
-// Stage 1 of the plain node loop, for `count` nodes at coordinates s along the reference face with
-// gaps `gap` and tributary lengths `length`: node position (x, y), tributary area and the shear
-// increment of this step. Per node this is the scalar form
-//   point = r1 + s tr + 0.5 gap normal;
-//   increment = (v_b(point) - v_a(point)) . t dt,  v(p) = v + w perp(p - c), perp(d) = (-d.y, d.x)
-// with the same operations in the same order (bit-identical), over plain arrays (restrict
-// parameters, no branch) so that the compiler vectorises it. The increment is also written for open
-// nodes; the law reads it only where the faces overlap.
-static void node_kinematics(int count, const NodeFrame& f, const double* __restrict s, const double* __restrict gap,
-                            const double* __restrict length, double* __restrict px, double* __restrict py,
-                            double* __restrict area, double* __restrict increment) {
-  const NodeFrame c = f;  // a local copy: no aliasing with the outputs
-  for (int k = 0; k < count; ++k) {
-    const double half_gap = 0.5 * gap[k];
-    const double x = (c.r1x + s[k] * c.trx) + half_gap * c.nx;
-    const double y = (c.r1y + s[k] * c.try_) + half_gap * c.ny;
-    px[k] = x;
-    py[k] = y;
-    area[k] = length[k] * c.width;
-    const double ub_x = c.vbx + c.wb * -(y - c.by), ub_y = c.vby + c.wb * (x - c.bx);
-    const double ua_x = c.vax + c.wa * -(y - c.ay), ua_y = c.vay + c.wa * (x - c.ax);
-    increment[k] = ((ub_x - ua_x) * c.tx + (ub_y - ua_y) * c.ty) * c.dt;
-  }
-}
-
-// DEMCAL_ENGINE_PATH=reference selects the engine's node loop as it was before its two-stage
-// (vectorised) form; read once per process. Any other value, or none, selects the current path.
-bool reference_path_requested() {
-  static const bool requested = [] {
-    const char* v = std::getenv("DEMCAL_ENGINE_PATH");
-    return v != nullptr && std::string(v) == "reference";
-  }();
-  return requested;
-}
-
 class Engine {
  public:
   explicit Engine(const Scene& scene) : scene_(scene) {
@@ -186,7 +159,6 @@ class Engine {
     skin_ = std::max(margin_, 0.05 * smallest);
     setup_loading();
     setup_gap();
-    for (auto* scratch : {&soa_x_, &soa_y_, &soa_area_, &soa_increment_}) scratch->assign(std::max(points_, 1), 0.0);
     sat_scratch_.assign(max_vertices_, 0.0);
     dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
   }
@@ -204,24 +176,28 @@ class Engine {
   void sweep(double margin);  // pairs_ <- every pair whose boxes, grown by margin, overlap (sorted)
   bool candidates_stale() const;
   void sweep_candidates();
-  void reference_broad_phase();
   void process_pair(int ia, int ib, int& contact_index);
-  // Geometry of one edge or corner contact's nodes, for the node loop with effects.
+  // Geometry of one edge or corner contact: the reference face (r1, tr, normal: outward from the
+  // reference block), the normal and tangent from block a to block b, and the gap joint flag.
   struct NodeLayout {
     Vec2 r1, tr, normal, normal_ab, tangent_ab;
     bool ref_on_a = true;
     bool gap_joint = false;
   };
+  // An edge contact's nodes along the reference face: `points_` nodes evenly spaced from `lo` (m
+  // along tr from r1), the gap linear in s through (s1, g1) with `slope`.
+  struct EdgeSpan {
+    double lo, spacing, s1, g1, slope;
+  };
   [[gnu::noinline]] void process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
                                                     const NodeLayout& layout, const std::vector<double>& s_nodes,
                                                     const std::vector<double>& gaps, const std::vector<double>& lengths);
-  void edge_nodes(double lo, double spacing, double s1, double s2, double g1, double g2);
+  void edge_nodes(const EdgeSpan& span);
+  void process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law, const NodeLayout& layout,
+                          const EdgeSpan& span);
   void process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law, const NodeLayout& layout,
                            const std::vector<double>& s_nodes, const std::vector<double>& gaps,
                            const std::vector<double>& lengths);
-  void process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
-                                  const NodeLayout& layout, const std::vector<double>& s_nodes,
-                                  const std::vector<double>& gaps, const std::vector<double>& lengths);
   // Ends every node loop: the pair's summed node force (on b; its opposite on a) and its moment about
   // the origin go to both blocks, and while loading the joint's mean slip and first touch are kept.
   void apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, const Vec2& resultant, double moment,
@@ -253,7 +229,6 @@ class Engine {
   double skin_ = 0;
   long sweeps_ = 0;
   std::vector<std::pair<int, int>> pairs_;
-  std::vector<std::pair<std::uint64_t, int>> pair_contacts_;  // reference path: key, contact index
   std::vector<int> order_;
   int points_ = 15;
   double cos_edge_tolerance_ = 1;
@@ -261,13 +236,11 @@ class Engine {
   double dt_ = 0;
   double max_weight_ = 0;
   bool loading_stage_ = false;
+  long integrations_ = 0;
   bool first_step_ = true;  // bonds (cohesion) exist only at joints present at the start
   long node_updates_ = 0;
-  // The engine's previous code path (DEMCAL_ENGINE_PATH=reference), kept for speed comparisons.
-  bool reference_path_ = reference_path_requested();
   // Scratch of the node loop, sized once per joint layout (no allocation in the step).
   std::vector<double> node_s_, node_gap_, node_length_;          // per node: s along the face, gap, length
-  std::vector<double> soa_x_, soa_y_, soa_area_, soa_increment_;  // per node: kinematics (stage 1)
   std::size_t max_vertices_ = 0;    // of any block
   std::vector<double> sat_scratch_;  // per edge of one block: the separating-axis test's minima
 
@@ -460,8 +433,7 @@ struct Separation {
 //   s_e = min over q's vertices v of (v . n_e) - offset_e,  value = the first largest s_e,
 // computed with the vertex loop outside and the edge loop inside, over plain arrays: the edge loop
 // vectorises, and each s_e still takes its minimum over the vertices in the same order: the same
-// bits as max_separation_reference below, which stops at the first edge beyond the search margin
-// (either way the caller then drops the pair). `scratch` holds p's edge count of doubles.
+// bits as the edge-by-edge loop. `scratch` holds p's edge count of doubles.
 // N, M > 0: p's and q's vertex counts known at compile time (quadrilaterals, the common case, are
 // unrolled completely); 0: read from the bodies.
 template <int N, int M>
@@ -520,26 +492,6 @@ static bool separations_still_valid(const Body& a, const Body& b, const Contact&
          c.sat_lead_b > 2 * (moved + turn_b * c.sat_reach) + rounding;
 }
 
-// The separating-axis test of the reference path (DEMCAL_ENGINE_PATH=reference), edge by edge.
-static std::pair<double, int> max_separation_reference(const Body& p, const Body& q, double margin) {
-  double best = -std::numeric_limits<double>::infinity();
-  int best_edge = 0;
-  const int n = static_cast<int>(p.world.size());
-  for (int e = 0; e < n; ++e) {
-    const Vec2& normal = p.world_normals[e];
-    const double offset = p.world[e].dot(normal);
-    double s = std::numeric_limits<double>::infinity();
-    for (const Vec2& v : q.world) s = std::min(s, v.dot(normal));
-    s -= offset;
-    if (s > best) {
-      best = s;
-      best_edge = e;
-      if (s > margin) break;
-    }
-  }
-  return {best, best_edge};
-}
-
 // `contact_index`: the pair's contact in contacts_, or -1 (set here when the contact is created).
 void Engine::process_pair(int ia, int ib, int& contact_index) {
   Body& a = bodies_[ia];
@@ -549,12 +501,8 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   // its last full test, only those two edges' separations (the same values).
   Contact* existing = contact_index >= 0 ? &contacts_[contact_index] : nullptr;
   Separation from_a, from_b;
-  const bool full_test = reference_path_ || existing == nullptr || !separations_still_valid(a, b, *existing);
-  if (reference_path_) {
-    std::tie(from_a.value, from_a.edge) = max_separation_reference(a, b, margin_);
-    if (from_a.value > margin_) return;
-    std::tie(from_b.value, from_b.edge) = max_separation_reference(b, a, margin_);
-  } else if (full_test) {
+  const bool full_test = existing == nullptr || !separations_still_valid(a, b, *existing);
+  if (full_test) {
     from_a = max_separation(a, b, sat_scratch_.data());
     if (from_a.value > margin_) return;
     from_b = max_separation(b, a, sat_scratch_.data());
@@ -593,31 +541,16 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   }
   const bool edge_contact = -most_opposed >= cos_edge_tolerance_;
 
-  // Node positions along the reference face (coordinate s from r1 along tr), gaps and lengths.
-  std::vector<double>& s_nodes = node_s_;
-  std::vector<double>& gaps = node_gap_;
-  std::vector<double>& lengths = node_length_;
+  // Nodes along the reference face (coordinate s from r1 along tr): an edge contact's span, or the
+  // one node of a corner contact in the scratch arrays.
+  EdgeSpan span{};
   if (edge_contact) {
     const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[inc_edge + 1 < ni ? inc_edge + 1 : 0];  // no integer division
     const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
     const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(ref_length, std::max(s1, s2));
     if (hi - lo <= 1e-9 * ref_length) return;
     const double g1 = (q1 - r1).dot(normal), g2 = (q2 - r1).dot(normal);
-    const double spacing = (hi - lo) / (points_ - 1);
-    if (reference_path_) {
-      s_nodes.clear();
-      gaps.clear();
-      lengths.clear();
-      for (int k = 0; k < points_; ++k) {
-        const double s = lo + k * spacing;
-        const double u = (s - s1) / (s2 - s1);
-        s_nodes.push_back(s);
-        gaps.push_back(g1 + u * (g2 - g1));
-        lengths.push_back((k == 0 || k == points_ - 1) ? 0.5 * spacing : spacing);
-      }
-    } else {
-      edge_nodes(lo, spacing, s1, s2, g1, g2);
-    }
+    span = {lo, (hi - lo) / (points_ - 1), s1, g1, (g2 - g1) / (s2 - s1)};
   } else {
     // Corner against face: the deepest vertex of the incident polygon, if it lies over the face.
     int deepest = 0;
@@ -634,9 +567,9 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     const int next = deepest + 1 < ni ? deepest + 1 : 0, previous = deepest > 0 ? deepest - 1 : ni - 1;
     const double shorter = std::min((inc.world[next] - inc.world[deepest]).norm(),
                                     (inc.world[previous] - inc.world[deepest]).norm());
-    s_nodes.assign(1, s);
-    gaps.assign(1, depth);
-    lengths.assign(1, shorter / (2.0 * (points_ - 1)));
+    node_s_.assign(1, s);
+    node_gap_.assign(1, depth);
+    node_length_.assign(1, shorter / (2.0 * (points_ - 1)));
   }
 
   const Vec2 normal_ab = ref_on_a ? normal : Vec2(-normal);
@@ -650,7 +583,7 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     contacts_.push_back(std::move(c));
   }
   Contact& contact = contacts_[contact_index];
-  if (full_test && !reference_path_) {
+  if (full_test) {
     contact.sat_valid = true;
     contact.sat_edge_a = edge_a;
     contact.sat_edge_b = edge_b;
@@ -662,7 +595,7 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     contact.sat_position_a = a.position;
     contact.sat_position_b = b.position;
   }
-  const int count = static_cast<int>(s_nodes.size());
+  const int count = edge_contact ? points_ : 1;
   const GroupLaw& group = groups_[contact.group];
   if (!contact.active || contact.corner != !edge_contact || static_cast<int>(contact.shear.size()) != count) {
     contact.shear.assign(count, 0.0);
@@ -676,93 +609,77 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   contact.ref_on_a = ref_on_a;
   if (static_cast<int>(contact.gap.size()) != count) contact.gap.resize(count);
 
-  if (!group.plain || (has_gap_ && key == gap_key_)) {
-    const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, has_gap_ && key == gap_key_};
-    process_nodes_with_effects(a, b, contact, group, layout, s_nodes, gaps, lengths);
-    return;
+  const bool gap_joint = has_gap_ && key == gap_key_;
+  const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, gap_joint};
+  if (!group.plain || gap_joint) {
+    if (edge_contact) edge_nodes(span);
+    process_nodes_with_effects(a, b, contact, group, layout, node_s_, node_gap_, node_length_);
+  } else if (edge_contact) {
+    process_plain_edge(a, b, contact, group.law, layout, span);
+  } else {
+    process_plain_nodes(a, b, contact, group.law, layout, node_s_, node_gap_, node_length_);
   }
-  // The plain law: every joint group without effects, exactly as the engine was before them.
-  const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, false};
-  if (reference_path_)
-    process_plain_nodes_scalar(a, b, contact, group.law, layout, s_nodes, gaps, lengths);
-  else
-    process_plain_nodes(a, b, contact, group.law, layout, s_nodes, gaps, lengths);
 }
 
-// Edge-contact nodes: `points_` nodes spaced evenly over [lo, lo + (points_ - 1) spacing] of the
-// reference face, their gaps interpolated linearly between the incident edge's ends (s1, g1) and
-// (s2, g2), and their tributary lengths (half a spacing at the two ends). Indexed writes into
-// arrays that keep their size from step to step (no allocation, no push_back bookkeeping), so the
-// loop vectorises; the arithmetic per node is the scalar form's, operation for operation.
-void Engine::edge_nodes(double lo, double spacing, double s1, double s2, double g1, double g2) {
+// An edge contact's nodes in the scratch arrays, for the node loop with effects: s along the face,
+// the gap and the tributary length (half a spacing at the two ends).
+void Engine::edge_nodes(const EdgeSpan& span) {
   const int n = points_;
-  if (static_cast<int>(node_s_.size()) != n) {  // after a corner contact (one node)
-    node_s_.resize(n);
-    node_gap_.resize(n);
-    node_length_.resize(n);
-  }
-  double* __restrict s = node_s_.data();
-  double* __restrict gap = node_gap_.data();
-  double* __restrict length = node_length_.data();
+  node_s_.resize(n);
+  node_gap_.resize(n);
+  node_length_.resize(n);
   for (int k = 0; k < n; ++k) {
-    s[k] = lo + k * spacing;
-    const double u = (s[k] - s1) / (s2 - s1);
-    gap[k] = g1 + u * (g2 - g1);
-    length[k] = spacing;
+    node_s_[k] = span.lo + k * span.spacing;
+    node_gap_[k] = span.g1 + (node_s_[k] - span.s1) * span.slope;
+    node_length_[k] = span.spacing;
   }
-  length[0] = 0.5 * spacing;
-  length[n - 1] = 0.5 * spacing;
+  node_length_[0] = 0.5 * span.spacing;
+  node_length_[n - 1] = 0.5 * span.spacing;
 }
 
-// The plain law's node loop in two stages.
-// Stage 1 (vectorised): the kinematics of every node into structure-of-arrays scratch: position
-// x/y, penetration, tributary area and shear increment along tangent_ab. It replaces, per node,
-//   point = r1 + s tr + 0.5 gap normal;  kin.shear_increment = (v_b(point) - v_a(point)) . t dt
-// written out component by component in the same order of operations (bit-identical results).
-// Stage 2 (scalar): the Mohr-Coulomb law with its per-node shear memory and the pair's resultant,
-// summed in node order as before (a floating-point sum cannot be reordered without changing bits).
-void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
-                                 const NodeLayout& layout, const std::vector<double>& s_nodes,
-                                 const std::vector<double>& gaps, const std::vector<double>& lengths) {
-  const int count = static_cast<int>(s_nodes.size());  // at most points_, the scratch's size
-  const double* gap = gaps.data();
-  const double* length = lengths.data();
-  const double* px = soa_x_.data();
-  const double* py = soa_y_.data();
-  const double* area = soa_area_.data();
-  const double* increment = soa_increment_.data();
-  const NodeFrame frame{layout.r1.x(), layout.r1.y(), layout.tr.x(), layout.tr.y(), layout.normal.x(),
-                        layout.normal.y(), layout.tangent_ab.x(), layout.tangent_ab.y(), a.velocity.x(),
-                        a.velocity.y(), a.angular_velocity, a.position.x(), a.position.y(), b.velocity.x(),
-                        b.velocity.y(), b.angular_velocity, b.position.x(), b.position.y(), scene_.width, dt_};
-  node_kinematics(count, frame, s_nodes.data(), gap, length, soa_x_.data(), soa_y_.data(), soa_area_.data(),
-                  soa_increment_.data());
-
-  double slip_weighted = 0, length_total = 0;
+// The plain law over an edge contact's nodes. Per node k the scalar form is
+//   point = r1 + s tr + 0.5 gap normal,  s = lo + k spacing,  gap = g1 + (s - s1) slope;
+//   increment = (v_b(point) - v_a(point)) . t dt,  v(p) = v + w perp(p - c);
+//   force on b = f_n n + f_s t,  moment about the origin += point x force.
+// The nodes are evenly spaced and the gap is linear along the face, so point, gap and increment are
+// linear in k (p0 + k dp, g0 + k dg, i0 + k di) and the moment of the resultant follows from four
+// sums over the touching nodes: p0 x (F_n n + F_s t) + dp x (K_n n + K_s t), with F the sums of
+// f_n, f_s and K the sums of k f_n, k f_s. The loop is left with the law itself.
+void Engine::process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                const NodeLayout& layout, const EdgeSpan& span) {
+  const int count = points_;
+  const double g0 = span.g1 + (span.lo - span.s1) * span.slope, dg = span.spacing * span.slope;
+  const Vec2 p0 = layout.r1 + span.lo * layout.tr + 0.5 * g0 * layout.normal;
+  const Vec2 dp = span.spacing * layout.tr + 0.5 * dg * layout.normal;
+  const Vec2 n = layout.normal_ab, t = layout.tangent_ab;
+  const double i0 = (b.velocity_at(p0) - a.velocity_at(p0)).dot(t) * dt_;
+  const double di = ((b.angular_velocity - a.angular_velocity) * perp(dp)).dot(t) * dt_;
+  const double inner_area = span.spacing * scene_.width;
+  double fn_sum = 0, fs_sum = 0, fn_first_moment = 0, fs_first_moment = 0, slip_weighted = 0, length_total = 0;
   bool touching = false;
-  // The pair's resultant: force on b and its moment about the origin, applied once at the end.
-  double fx = 0, fy = 0, moment = 0;
-  const double nabx = layout.normal_ab.x(), naby = layout.normal_ab.y();
   for (int k = 0; k < count; ++k) {
-    // Nodes are stored in the order of increasing coordinate along tangent_ab.
-    const int slot = layout.ref_on_a ? k : count - 1 - k;
-    contact.gap[slot] = gap[k];
+    const int slot = layout.ref_on_a ? k : count - 1 - k;  // stored in order along tangent_ab
+    const double gap = g0 + k * dg;
+    contact.gap[slot] = gap;
+    const double end = k == 0 || k == count - 1 ? 0.5 : 1.0;
     NodeKinematics kin;
-    kin.penetration = -gap[k];
-    kin.area = area[k];
-    kin.shear_increment = increment[k];
+    kin.penetration = -gap;
+    kin.area = end * inner_area;
+    kin.shear_increment = i0 + k * di;
     const NodeForces f = law.evaluate(kin, contact.shear[slot]);
     if (f.normal == 0) continue;
     touching = true;
-    const double force_x = f.normal * nabx + f.shear * frame.tx, force_y = f.normal * naby + f.shear * frame.ty;
-    fx += force_x;
-    fy += force_y;
-    moment += px[k] * force_y - py[k] * force_x;
-    slip_weighted += f.plastic_slip * length[k];
-    length_total += length[k];
+    fn_sum += f.normal;
+    fs_sum += f.shear;
+    fn_first_moment += k * f.normal;
+    fs_first_moment += k * f.shear;
+    slip_weighted += f.plastic_slip * end * span.spacing;
+    length_total += end * span.spacing;
   }
   node_updates_ += count;
-  apply_pair_sums(a, b, contact, touching, Vec2(fx, fy), moment, slip_weighted, length_total);
+  const Vec2 resultant = fn_sum * n + fs_sum * t;
+  const double moment = cross(p0, resultant) + cross(dp, fn_first_moment * n + fs_first_moment * t);
+  apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
 }
 
 void Engine::apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, const Vec2& resultant, double moment,
@@ -777,10 +694,9 @@ void Engine::apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, 
   if (touching && loading_stage_) contact.ever_touched = true;
 }
 
-// The plain law's node loop as the engine ran it before the two-stage form above, one node at a
-// time; selected with DEMCAL_ENGINE_PATH=reference for comparisons.
-void Engine::process_plain_nodes_scalar(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
-                                        const NodeLayout& layout, const std::vector<double>& s_nodes,
+// The plain law node by node (a corner contact's single node).
+void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+                                 const NodeLayout& layout, const std::vector<double>& s_nodes,
                                         const std::vector<double>& gaps, const std::vector<double>& lengths) {
   const int count = static_cast<int>(s_nodes.size());
   const Vec2 r1 = layout.r1, tr = layout.tr, normal = layout.normal;
@@ -920,20 +836,6 @@ void Engine::sweep_candidates() {
   ++sweeps_;
 }
 
-// The broad phase as the engine ran it before the candidate list (DEMCAL_ENGINE_PATH=reference): a
-// sweep with the search margin every step and a hash look-up of every pair's contact.
-void Engine::reference_broad_phase() {
-  sweep(margin_);
-  pair_contacts_.clear();
-  for (const auto& [i, j] : pairs_) {
-    const std::uint64_t key = (static_cast<std::uint64_t>(i) << 32) | static_cast<std::uint32_t>(j);
-    const auto found = contact_index_.find(key);
-    pair_contacts_.emplace_back(key, found == contact_index_.end() ? -1 : found->second);
-  }
-  for (Contact& c : contacts_) c.seen = false;
-  for (std::size_t p = 0; p < pairs_.size(); ++p) process_pair(pairs_[p].first, pairs_[p].second, pair_contacts_[p].second);
-}
-
 void Engine::compute_forces() {
   for (Body& b : bodies_) {
     b.force = b.weight;
@@ -959,14 +861,10 @@ void Engine::compute_forces() {
     b.torque += cross(p - b.position, force);
   }
 
-  if (reference_path_) {
-    reference_broad_phase();
-  } else {
-    if (candidates_stale()) sweep_candidates();
-    for (Contact& c : contacts_) c.seen = false;
-    for (Candidate& c : candidates_)
-      if (boxes_within(bodies_[c.first], bodies_[c.second], margin_)) process_pair(c.first, c.second, c.contact);
-  }
+  if (candidates_stale()) sweep_candidates();
+  for (Contact& c : contacts_) c.seen = false;
+  for (Candidate& c : candidates_)
+    if (boxes_within(bodies_[c.first], bodies_[c.second], margin_)) process_pair(c.first, c.second, c.contact);
   first_step_ = false;
   for (Contact& c : contacts_) {
     c.active = c.seen;
@@ -987,18 +885,20 @@ double Engine::actuator_force() const {
 void Engine::integrate() {
   const double alpha = scene_.solver.local_damping;
   const auto damped = [alpha](double f, double v) { return v == 0 ? f : f - alpha * std::abs(f) * (v > 0 ? 1 : -1); };
+  // The library's sine and cosine every 1024 steps bound the drift of the incremental rotation.
+  const bool exact_rotation = (integrations_++ & 1023) == 0;
+  // Component by component in registers: the velocity written as two scalars and read back as one
+  // vector stalls the store buffer (the same operations as `position += dt velocity`).
   for (Body& b : bodies_) {
     if (b.fixed) continue;
-    if (b.springs) {  // a compliant support may hold a direction
-      if (!b.hold_x) b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
-      if (!b.hold_y) b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
-    } else {
-      b.velocity.x() += dt_ * damped(b.force.x(), b.velocity.x()) / b.inertial_mass;
-      b.velocity.y() += dt_ * damped(b.force.y(), b.velocity.y()) / b.inertial_mass;
-    }
-    if (!b.fixed_rotation) b.angular_velocity += dt_ * damped(b.torque, b.angular_velocity) / b.inertial_inertia;
-    b.position += dt_ * b.velocity;
-    b.angle += dt_ * b.angular_velocity;
+    double vx = b.velocity.x(), vy = b.velocity.y();
+    const double step_over_mass = dt_ / b.inertial_mass;
+    if (!b.hold_x) vx += damped(b.force.x(), vx) * step_over_mass;  // a compliant support
+    if (!b.hold_y) vy += damped(b.force.y(), vy) * step_over_mass;  // may hold a direction
+    b.velocity = Vec2(vx, vy);
+    if (!b.fixed_rotation) b.angular_velocity += damped(b.torque, b.angular_velocity) * (dt_ / b.inertial_inertia);
+    b.position = Vec2(b.position.x() + dt_ * vx, b.position.y() + dt_ * vy);
+    b.turn(dt_ * b.angular_velocity, exact_rotation);
     b.update_world();
   }
 }

@@ -1,0 +1,167 @@
+#!/usr/bin/env python3
+"""Whether two builds of the engine compute the same physics, judged against the engine's own
+round-off spread (docs/engine.md, "Same physics, measured against round-off").
+
+A quasi-static masonry curve is chaotic after the first hinges form: a change of the time step in
+its 14th digit moves the reference arch's peak by up to 0.3 % and its curve by 0.7 % RMS of the
+peak. A change of the engine's arithmetic cannot be held to a tolerance tighter than that. This
+script measures the spread and asks whether the candidate's runs belong to it:
+
+  1. each build runs the scene once as it is and MEMBERS more times with the time step scaled by
+     1 + k 1e-14 (k = +-1, +-2, ...): its round-off ensemble;
+  2. the distance between two runs is the RMS of their force difference over the recorded rows
+     (rows are at fixed actuator travel), as a fraction of the baseline's peak;
+  3. a two-sample permutation test on the energy statistic
+       E = 2 mean(baseline-candidate distances) - mean(baseline pairs) - mean(candidate pairs)
+     (zero when the two ensembles are alike): the p-value is the fraction of random relabellings of
+     the pooled runs whose E is at least the observed one.
+
+The candidate computes the same physics when p >= --alpha (0.05). The table also gives each
+ensemble's peaks, its runs' differences from the baseline's unperturbed run, and how many of them
+pass a fixed tolerance (--peak-tolerance, --rms-tolerance) that the baseline's own members would
+have to pass too.
+
+usage: engine_equivalence.py BASELINE_DEMCAL CANDIDATE_DEMCAL [--velocity 0.001] [--members 8]
+                             [--scene-flags "arch --contacts-per-joint 15"] [--jobs 2] [--out DIR]
+                             [--permutations 4000] [--alpha 0.05] [--seed 1]
+Exit status 0 when the candidate is inside the baseline's spread, 1 when not.
+"""
+import argparse
+import concurrent.futures
+import csv
+import json
+import math
+import os
+import random
+import shlex
+import statistics
+import subprocess
+import sys
+import tempfile
+
+
+def run(binary, scene, time_step, out_dir):
+    """Runs `binary simulate` on `scene` with the given time step (0: the scene's automatic one);
+    returns (forces of the recorded rows, summary)."""
+    with open(scene) as f:
+        data = json.load(f)
+    data["solver"]["time_step"] = time_step
+    os.makedirs(out_dir, exist_ok=True)
+    scene_file = os.path.join(out_dir, "scene.json")
+    with open(scene_file, "w") as f:
+        json.dump(data, f)
+    done = subprocess.run([binary, "simulate", scene_file, "--out", out_dir], capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit(f"{binary} simulate {scene_file} failed: {done.stderr.strip()}")
+    with open(os.path.join(out_dir, "summary.json")) as f:
+        summary = json.load(f)
+    with open(os.path.join(out_dir, "curves.csv")) as f:
+        forces = [float(row["force"]) for row in csv.DictReader(f)]
+    return forces, summary
+
+
+def rms_fraction(forces, reference):
+    """RMS of the force difference over the common rows, as a fraction of the reference's peak."""
+    n = min(len(forces), len(reference))
+    if n == 0:
+        return math.inf
+    return math.sqrt(sum((forces[i] - reference[i]) ** 2 for i in range(n)) / n) / max(reference)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("baseline")
+    parser.add_argument("candidate")
+    parser.add_argument("--velocity", type=float, default=0.001, help="loading velocity, m/s")
+    parser.add_argument("--members", type=int, default=8, help="perturbed runs per build")
+    parser.add_argument("--scene-flags", default="arch", help="`demcal scene` subcommand and flags")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--peak-tolerance", type=float, default=0.001, help="fixed peak tolerance (fraction)")
+    parser.add_argument("--rms-tolerance", type=float, default=0.005, help="fixed RMS tolerance (fraction of the peak)")
+    parser.add_argument("--out", default=None, help="folder for the runs (default: a temporary one)")
+    parser.add_argument("--permutations", type=int, default=4000)
+    parser.add_argument("--alpha", type=float, default=0.05, help="smallest p-value still called the same physics")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the permutations")
+    args = parser.parse_args()
+    if args.members < 2:
+        parser.error("--members must be at least 2")
+
+    out = args.out or tempfile.mkdtemp(prefix="engine-equivalence-")
+    os.makedirs(out, exist_ok=True)
+    scene = os.path.join(out, "scene.json")
+    flags = shlex.split(args.scene_flags)
+    made = subprocess.run([args.baseline, "scene", *flags, "--velocity", str(args.velocity), "-o", scene],
+                          capture_output=True, text=True)
+    if made.returncode != 0:
+        sys.exit(f"demcal scene {args.scene_flags} failed: {made.stderr.strip()}")
+
+    reference, summary = run(args.baseline, scene, 0, os.path.join(out, "baseline-0"))
+    time_step = summary["time_step"]
+    scales = [0] + [(k // 2 + 1) * (1 if k % 2 == 0 else -1) for k in range(args.members)]
+    jobs = [(build, binary, k) for build, binary in (("baseline", args.baseline), ("candidate", args.candidate))
+            for k in scales if not (build == "baseline" and k == 0)]
+    results = {"baseline": {0: (reference, summary)}, "candidate": {}}
+    with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {pool.submit(run, binary, scene, time_step * (1 + k * 1e-14) if k else 0,
+                               os.path.join(out, f"{build}{k:+d}")): (build, k) for build, binary, k in jobs}
+        for future in concurrent.futures.as_completed(futures):
+            build, k = futures[future]
+            results[build][k] = future.result()
+
+    stats = {}
+    for build in ("baseline", "candidate"):
+        runs = results[build]
+        peaks = [max(forces) for forces, _ in runs.values()]
+        differences = [rms_fraction(forces, reference) for k, (forces, _) in runs.items() if build == "candidate" or k]
+        peak_changes = [abs(p / max(reference) - 1) for k, p in zip(runs, peaks) if build == "candidate" or k]
+        fixed_pass = sum(d <= args.rms_tolerance and c <= args.peak_tolerance for d, c in zip(differences, peak_changes))
+        stats[build] = {
+            "peaks": peaks, "differences": differences, "fixed_pass": fixed_pass, "compared": len(differences),
+            "wall": statistics.median(s["wall_time_s"] for _, s in runs.values()),
+            "steps": statistics.median(s["steps"] for _, s in runs.values()),
+        }
+
+    curves = [results["baseline"][k][0] for k in sorted(results["baseline"])] + \
+             [results["candidate"][k][0] for k in sorted(results["candidate"])]
+    n_base = len(results["baseline"])
+    distance = [[rms_fraction(a, b) * max(b) / max(reference) for b in curves] for a in curves]
+    observed = energy_statistic(distance, list(range(n_base)), list(range(n_base, len(curves))))
+    rng = random.Random(args.seed)
+    pooled = list(range(len(curves)))
+    at_least = 0
+    for _ in range(args.permutations):
+        rng.shuffle(pooled)
+        at_least += energy_statistic(distance, pooled[:n_base], pooled[n_base:]) >= observed
+    p_value = (at_least + 1) / (args.permutations + 1)
+    same = p_value >= args.alpha
+
+    print(f"Scene `demcal scene {args.scene_flags} --velocity {args.velocity}`, time step {time_step:.6g} s "
+          f"scaled by 1 + k 1e-14, k in {sorted(scales)}; runs in {out}\n")
+    print("| build | runs | peak (N): unperturbed, min–max | RMS difference from the baseline's unperturbed run "
+          f"(% of peak): median, max | within {100 * args.peak_tolerance:g} % peak and {100 * args.rms_tolerance:g} % RMS "
+          "| mean distance within the build (% of peak) | steps | wall time per run (s) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for build, members in (("baseline", range(n_base)), ("candidate", range(n_base, len(curves)))):
+        s = stats[build]
+        within = [distance[i][j] for i in members for j in members if i < j]
+        print(f"| {build} | {len(s['peaks'])} | {results[build][0][1]['peak_force']:.2f}, "
+              f"{min(s['peaks']):.2f}–{max(s['peaks']):.2f} | {100 * statistics.median(s['differences']):.3f}, "
+              f"{100 * max(s['differences']):.3f} | {s['fixed_pass']} of {s['compared']} | "
+              f"{100 * statistics.mean(within):.3f} | {s['steps']:.0f} | {s['wall']:.3f} |")
+    across = [distance[i][j] for i in range(n_base) for j in range(n_base, len(curves))]
+    print(f"\nMean distance between a baseline and a candidate run: {100 * statistics.mean(across):.3f} % of peak; "
+          f"energy statistic {100 * observed:.4f} %, permutation p = {p_value:.3f} ({args.permutations} permutations).")
+    print("Same physics." if same else f"Outside the baseline's round-off spread (p < {args.alpha:g}).")
+    return 0 if same else 1
+
+
+def energy_statistic(distance, first, second):
+    """2 mean(d(first, second)) - mean(d within first) - mean(d within second), over distinct pairs."""
+    def mean_within(group):
+        pairs = [distance[i][j] for a, i in enumerate(group) for j in group[a + 1:]]
+        return sum(pairs) / len(pairs)
+    across = sum(distance[i][j] for i in first for j in second) / (len(first) * len(second))
+    return 2 * across - mean_within(first) - mean_within(second)
+
+if __name__ == "__main__":
+    sys.exit(main())
