@@ -4,7 +4,7 @@ with none, measurements made by the engine with parameters the diagnosis is not 
 noise, one diagnosis per noise seed; then the table of how often the right effect was named, how
 well its parameters came back, and how far the error fell.
 
-usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5]
+usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5] [--first-seed 1]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
                          [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--magnitude 1]
                          [--jobs 1]
@@ -149,6 +149,7 @@ def main():
     p.add_argument("out")
     p.add_argument("--cases", default=",".join(CASES))
     p.add_argument("--seeds", type=int, default=5)
+    p.add_argument("--first-seed", type=int, default=1, help="noise seeds first-seed .. first-seed + seeds - 1")
     p.add_argument("--velocity", type=float, default=0.001)
     p.add_argument("--contacts-per-joint", type=int, default=5)
     p.add_argument("--max-displacement", type=float, default=0.008)
@@ -168,7 +169,7 @@ def main():
     for c in cases:
         if c not in CASES:
             p.error("unknown case %r (known: %s)" % (c, ", ".join(CASES)))
-    work = [(c, s) for c in cases for s in range(1, args.seeds + 1)]
+    work = [(c, s) for c in cases for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futures = {pool.submit(run_one, binary, args, c, s): (c, s) for c, s in work}
