@@ -163,5 +163,6 @@ def energy_statistic(distance, first, second):
     across = sum(distance[i][j] for i in first for j in second) / (len(first) * len(second))
     return 2 * across - mean_within(first) - mean_within(second)
 
+
 if __name__ == "__main__":
     sys.exit(main())
