@@ -60,12 +60,12 @@ def run(binary, scene, time_step, out_dir):
     return forces, summary
 
 
-def rms_fraction(forces, reference):
-    """RMS of the force difference over the common rows, as a fraction of the reference's peak."""
-    n = min(len(forces), len(reference))
+def rms_difference(forces, other):
+    """RMS of the force difference over the common rows, N."""
+    n = min(len(forces), len(other))
     if n == 0:
         return math.inf
-    return math.sqrt(sum((forces[i] - reference[i]) ** 2 for i in range(n)) / n) / max(reference)
+    return math.sqrt(sum((forces[i] - other[i]) ** 2 for i in range(n)) / n)
 
 
 def main():
@@ -112,7 +112,7 @@ def main():
     for build in ("baseline", "candidate"):
         runs = results[build]
         peaks = [max(forces) for forces, _ in runs.values()]
-        differences = [rms_fraction(forces, reference) for k, (forces, _) in runs.items() if build == "candidate" or k]
+        differences = [rms_difference(forces, reference) / max(reference) for k, (forces, _) in runs.items() if build == "candidate" or k]
         peak_changes = [abs(p / max(reference) - 1) for k, p in zip(runs, peaks) if build == "candidate" or k]
         fixed_pass = sum(d <= args.rms_tolerance and c <= args.peak_tolerance for d, c in zip(differences, peak_changes))
         stats[build] = {
@@ -124,7 +124,7 @@ def main():
     curves = [results["baseline"][k][0] for k in sorted(results["baseline"])] + \
              [results["candidate"][k][0] for k in sorted(results["candidate"])]
     n_base = len(results["baseline"])
-    distance = [[rms_fraction(a, b) * max(b) / max(reference) for b in curves] for a in curves]
+    distance = [[rms_difference(a, b) / max(reference) for b in curves] for a in curves]
     observed = energy_statistic(distance, list(range(n_base)), list(range(n_base, len(curves))))
     rng = random.Random(args.seed)
     pooled = list(range(len(curves)))

@@ -189,15 +189,12 @@ class Engine {
   struct EdgeSpan {
     double lo, spacing, s1, g1, slope;
   };
-  [[gnu::noinline]] void process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
-                                                    const NodeLayout& layout, const std::vector<double>& s_nodes,
-                                                    const std::vector<double>& gaps, const std::vector<double>& lengths);
+  [[gnu::noinline]] void process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& group, const NodeLayout& layout,
+                                       const std::vector<double>& s_nodes, const std::vector<double>& gaps,
+                                       const std::vector<double>& lengths);
   void edge_nodes(const EdgeSpan& span);
   void process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law, const NodeLayout& layout,
                           const EdgeSpan& span);
-  void process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law, const NodeLayout& layout,
-                           const std::vector<double>& s_nodes, const std::vector<double>& gaps,
-                           const std::vector<double>& lengths);
   // Ends every node loop: the pair's summed node force (on b; its opposite on a) and its moment about
   // the origin go to both blocks, and while loading the joint's mean slip and first touch are kept.
   void apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, const Vec2& resultant, double moment,
@@ -611,17 +608,15 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
 
   const bool gap_joint = has_gap_ && key == gap_key_;
   const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, gap_joint};
-  if (!group.plain || gap_joint) {
-    if (edge_contact) edge_nodes(span);
-    process_nodes_with_effects(a, b, contact, group, layout, node_s_, node_gap_, node_length_);
-  } else if (edge_contact) {
+  if (edge_contact && group.plain && !gap_joint) {
     process_plain_edge(a, b, contact, group.law, layout, span);
   } else {
-    process_plain_nodes(a, b, contact, group.law, layout, node_s_, node_gap_, node_length_);
+    if (edge_contact) edge_nodes(span);
+    process_nodes(a, b, contact, group, layout, node_s_, node_gap_, node_length_);
   }
 }
 
-// An edge contact's nodes in the scratch arrays, for the node loop with effects: s along the face,
+// An edge contact's nodes in the scratch arrays, for process_nodes: s along the face,
 // the gap and the tributary length (half a spacing at the two ends).
 void Engine::edge_nodes(const EdgeSpan& span) {
   const int n = points_;
@@ -694,43 +689,9 @@ void Engine::apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, 
   if (touching && loading_stage_) contact.ever_touched = true;
 }
 
-// The plain law node by node (a corner contact's single node).
-void Engine::process_plain_nodes(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
-                                 const NodeLayout& layout, const std::vector<double>& s_nodes,
-                                        const std::vector<double>& gaps, const std::vector<double>& lengths) {
-  const int count = static_cast<int>(s_nodes.size());
-  const Vec2 r1 = layout.r1, tr = layout.tr, normal = layout.normal;
-  const Vec2 normal_ab = layout.normal_ab, tangent_ab = layout.tangent_ab;
-  const bool ref_on_a = layout.ref_on_a;
-  double slip_weighted = 0, length_total = 0;
-  bool touching = false;
-  Vec2 resultant = Vec2::Zero();
-  double moment = 0;
-  for (int k = 0; k < count; ++k) {
-    const int slot = ref_on_a ? k : count - 1 - k;
-    const double gap = gaps[k];
-    contact.gap[slot] = gap;
-    const Vec2 point = r1 + s_nodes[k] * tr + 0.5 * gap * normal;
-    NodeKinematics kin;
-    kin.penetration = -gap;
-    kin.area = lengths[k] * scene_.width;
-    if (kin.penetration > 0) kin.shear_increment = (b.velocity_at(point) - a.velocity_at(point)).dot(tangent_ab) * dt_;
-    const NodeForces f = law.evaluate(kin, contact.shear[slot]);
-    ++node_updates_;
-    if (f.normal == 0) continue;
-    touching = true;
-    const Vec2 force_on_b = f.normal * normal_ab + f.shear * tangent_ab;
-    resultant += force_on_b;
-    moment += cross(point, force_on_b);
-    slip_weighted += f.plastic_slip * lengths[k];
-    length_total += lengths[k];
-  }
-  apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
-}
-
-// The node loop of a joint group with effects on (EffectLaw and its node history), or of the gap
-// joint (whose group may be plain).
-void Engine::process_nodes_with_effects(Body& a, Body& b, Contact& contact, const GroupLaw& group,
+// The node loop, node by node: a corner contact's single node, a joint group with effects on
+// (EffectLaw and its node history), or the gap joint (whose group may be plain).
+void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& group,
                                         const NodeLayout& layout, const std::vector<double>& s_nodes,
                                         const std::vector<double>& gaps, const std::vector<double>& lengths) {
   const int count = static_cast<int>(s_nodes.size());

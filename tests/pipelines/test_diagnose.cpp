@@ -404,10 +404,13 @@ TEST(DiagnoseLoop, NamesAHiddenCompliantSupportAndRecoversIt) {
 TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   // Bad input first: an unknown effect is named in the message, before any simulation.
   const fs::path dir = test_support::fresh_dir("diagnose", "cli");
+  const dem::ArchOptions arch = cli_arch();
   // soft springs under the right abutment, which friction alone cannot imitate: the loop goes on to a candidate
-  const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, cli_arch());
+  const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, arch);
   // two cases of the same test: "main" is fitted, "check" is held out (--held-out check below)
-  const json scene = {{"generator", "arch"}, {"options", {{"contacts_per_joint", 5}, {"velocity", 0.005}, {"max_displacement", 0.008}}}};
+  const json scene = {{"generator", "arch"},
+                      {"options", {{"contacts_per_joint", arch.contacts_per_joint}, {"velocity", arch.velocity},
+                                   {"max_displacement", arch.max_displacement}}}};
   json j = {{"name", "cli"},
             {"cases", {{{"name", "main"}, {"scene", scene}, {"measured", measured.string()}},
                        {{"name", "check"}, {"scene", scene}, {"measured", measured.string()}}}},
