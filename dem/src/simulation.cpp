@@ -34,11 +34,10 @@ using geometry::perp;
 struct Body {
   std::string name, label;
   std::vector<Vec2> local;  // vertices relative to the centroid at angle 0
-  std::vector<Vec2> world;
   std::vector<Vec2> local_normals;  // outward unit normal of edge i (vertex i to i+1) at angle 0
-  std::vector<Vec2> world_normals;
-  // The same in plain arrays, for the separating-axis test: vertex coordinates, edge normals and
-  // each edge's offset (its first vertex . its normal), updated with the position.
+  // In the world, in plain arrays (the separating-axis test's loops vectorise over them): vertex
+  // coordinates, edge normals and each edge's offset (its first vertex . its normal), updated with
+  // the position; vertex(i) and normal(i) read them as vectors.
   std::vector<double> world_x, world_y, normal_x, normal_y, edge_offset;
   std::vector<double> edge_lengths;
   Vec2 start_position = Vec2::Zero();
@@ -66,6 +65,9 @@ struct Body {
   Eigen::Matrix2d rotation() const { return (Eigen::Matrix2d() << cos_angle, -sin_angle, sin_angle, cos_angle).finished(); }
   Vec2 to_local(const Vec2& world_point) const { return rotation().transpose() * (world_point - position); }
   Vec2 to_world(const Vec2& local_point) const { return position + rotation() * local_point; }
+  Vec2 vertex(int i) const { return Vec2(world_x[i], world_y[i]); }
+  Vec2 normal(int i) const { return Vec2(normal_x[i], normal_y[i]); }
+  int vertex_count() const { return static_cast<int>(local.size()); }
   Vec2 velocity_at(const Vec2& world_point) const {
     return velocity + angular_velocity * perp(world_point - position);
   }
@@ -91,15 +93,14 @@ struct Body {
     box_min = Vec2::Constant(std::numeric_limits<double>::infinity());
     box_max = -box_min;
     for (std::size_t i = 0; i < local.size(); ++i) {
-      world[i] = position + m * local[i];
-      world_normals[i] = m * local_normals[i];
-      box_min = box_min.cwiseMin(world[i]);
-      box_max = box_max.cwiseMax(world[i]);
-      world_x[i] = world[i].x();
-      world_y[i] = world[i].y();
-      normal_x[i] = world_normals[i].x();
-      normal_y[i] = world_normals[i].y();
-      edge_offset[i] = world[i].dot(world_normals[i]);
+      const Vec2 w = position + m * local[i], n = m * local_normals[i];
+      box_min = box_min.cwiseMin(w);
+      box_max = box_max.cwiseMax(w);
+      world_x[i] = w.x();
+      world_y[i] = w.y();
+      normal_x[i] = n.x();
+      normal_y[i] = n.y();
+      edge_offset[i] = w.dot(n);
     }
   }
 };
@@ -275,13 +276,11 @@ void Engine::build_bodies() {
       body.local.push_back(v - c);
       body.radius = std::max(body.radius, (v - c).norm());
     }
-    body.world = b.vertices;
     for (std::size_t i = 0; i < body.local.size(); ++i) {
       const Vec2 edge = body.local[(i + 1) % body.local.size()] - body.local[i];
       body.edge_lengths.push_back(edge.norm());
       body.local_normals.push_back(Vec2(edge.y(), -edge.x()) / edge.norm());
     }
-    body.world_normals = body.local_normals;
     for (auto* soa : {&body.world_x, &body.world_y, &body.normal_x, &body.normal_y, &body.edge_offset})
       soa->assign(body.local.size(), 0.0);
     max_vertices_ = std::max(max_vertices_, body.local.size());
@@ -522,16 +521,16 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   const Body& ref = ref_on_a ? a : b;
   const Body& inc = ref_on_a ? b : a;
   const int ref_edge = ref_on_a ? edge_a : edge_b;
-  const int ni = static_cast<int>(inc.world.size());
-  const Vec2 r1 = ref.world[ref_edge];
+  const int ni = inc.vertex_count();
+  const Vec2 r1 = ref.vertex(ref_edge);
   const double ref_length = ref.edge_lengths[ref_edge];
-  const Vec2 normal = ref.world_normals[ref_edge];  // outward from the reference polygon
+  const Vec2 normal = ref.normal(ref_edge);  // outward from the reference polygon
   const Vec2 tr(-normal.y(), normal.x());
 
   int inc_edge = 0;
   double most_opposed = std::numeric_limits<double>::infinity();
   for (int e = 0; e < ni; ++e) {  // selects, not branches: the winning edge varies from pair to pair
-    const double c = inc.world_normals[e].dot(normal);
+    const double c = inc.normal(e).dot(normal);
     const bool more = c < most_opposed;
     most_opposed = more ? c : most_opposed;
     inc_edge = more ? e : inc_edge;
@@ -542,7 +541,7 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   // one node of a corner contact in the scratch arrays.
   EdgeSpan span{};
   if (edge_contact) {
-    const Vec2 q1 = inc.world[inc_edge], q2 = inc.world[inc_edge + 1 < ni ? inc_edge + 1 : 0];  // no integer division
+    const Vec2 q1 = inc.vertex(inc_edge), q2 = inc.vertex(inc_edge + 1 < ni ? inc_edge + 1 : 0);  // no integer division
     const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
     const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(ref_length, std::max(s1, s2));
     if (hi - lo <= 1e-9 * ref_length) return;
@@ -553,17 +552,17 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     int deepest = 0;
     double depth = std::numeric_limits<double>::infinity();
     for (int v = 0; v < ni; ++v) {
-      const double g = (inc.world[v] - r1).dot(normal);
+      const double g = (inc.vertex(v) - r1).dot(normal);
       if (g < depth) {
         depth = g;
         deepest = v;
       }
     }
-    const double s = (inc.world[deepest] - r1).dot(tr);
+    const double s = (inc.vertex(deepest) - r1).dot(tr);
     if (s < 0 || s > ref_length) return;
     const int next = deepest + 1 < ni ? deepest + 1 : 0, previous = deepest > 0 ? deepest - 1 : ni - 1;
-    const double shorter = std::min((inc.world[next] - inc.world[deepest]).norm(),
-                                    (inc.world[previous] - inc.world[deepest]).norm());
+    const double shorter = std::min((inc.vertex(next) - inc.vertex(deepest)).norm(),
+                                    (inc.vertex(previous) - inc.vertex(deepest)).norm());
     node_s_.assign(1, s);
     node_gap_.assign(1, depth);
     node_length_.assign(1, shorter / (2.0 * (points_ - 1)));
@@ -1021,7 +1020,7 @@ void Engine::finish(Recording& rec) const {
   for (const Body& b : bodies_) {
     BlockState s;
     s.name = b.name;
-    s.vertices = b.world;
+    for (int i = 0; i < b.vertex_count(); ++i) s.vertices.push_back(b.vertex(i));
     s.displacement = b.position - b.start_position;
     s.rotation = b.angle;
     s.fixed = !b.counts_weight;  // fixed in the scene (a compliant support included)
