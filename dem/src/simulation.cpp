@@ -177,7 +177,14 @@ class Engine {
   void sweep(double margin);  // pairs_ <- every pair whose boxes, grown by margin, overlap (sorted)
   bool candidates_stale() const;
   void sweep_candidates();
-  void process_pair(int ia, int ib, int& contact_index);
+  // Every pair in two passes: first the geometry of all pairs (reading positions only), then the
+  // node loops and force sums in the same order (reading velocities, adding to the blocks' forces).
+  // Each pass's pairs are independent of each other, so the processor overlaps consecutive pairs
+  // instead of waiting on one pair's chain from separating axis to force; the forces are summed in
+  // the order of the single pass this replaces (the same bits).
+  struct PairWork;
+  bool pair_geometry(int ia, int ib, int& contact_index, PairWork& work);
+  void pair_forces(const PairWork& work);
   // Geometry of one edge or corner contact: the reference face (r1, tr, normal: outward from the
   // reference block), the normal and tangent from block a to block b, and the gap joint flag.
   struct NodeLayout {
@@ -189,6 +196,15 @@ class Engine {
   // along tr from r1), the gap linear in s through (s1, g1) with `slope`.
   struct EdgeSpan {
     double lo, spacing, s1, g1, slope;
+  };
+  // One touching pair between the two passes: its blocks and contact, the layout, and an edge
+  // contact's span or a corner contact's node (s, gap, tributary length).
+  struct PairWork {
+    int a = 0, b = 0, contact = 0;
+    bool edge_contact = true;
+    NodeLayout layout;
+    EdgeSpan span{};
+    double corner_s = 0, corner_gap = 0, corner_length = 0;
   };
   [[gnu::noinline]] void process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& group, const NodeLayout& layout,
                                        const std::vector<double>& s_nodes, const std::vector<double>& gaps,
@@ -227,6 +243,7 @@ class Engine {
   double skin_ = 0;
   long sweeps_ = 0;
   std::vector<std::pair<int, int>> pairs_;
+  std::vector<PairWork> work_;  // this step's touching pairs, in candidate order
   std::vector<int> order_;
   int points_ = 15;
   double cos_edge_tolerance_ = 1;
@@ -489,7 +506,8 @@ static bool separations_still_valid(const Body& a, const Body& b, const Contact&
 }
 
 // `contact_index`: the pair's contact in contacts_, or -1 (set here when the contact is created).
-void Engine::process_pair(int ia, int ib, int& contact_index) {
+// False when the pair does not touch (no work).
+bool Engine::pair_geometry(int ia, int ib, int& contact_index, PairWork& work) {
   Body& a = bodies_[ia];
   Body& b = bodies_[ib];
   const std::uint64_t key = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
@@ -500,14 +518,14 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   const bool full_test = existing == nullptr || !separations_still_valid(a, b, *existing);
   if (full_test) {
     from_a = max_separation(a, b, sat_scratch_.data());
-    if (from_a.value > margin_) return;
+    if (from_a.value > margin_) return false;
     from_b = max_separation(b, a, sat_scratch_.data());
   } else {
     from_a = {edge_separation(a, b, existing->sat_edge_a), existing->sat_edge_a, 0};
-    if (from_a.value > margin_) return;
+    if (from_a.value > margin_) return false;
     from_b = {edge_separation(b, a, existing->sat_edge_b), existing->sat_edge_b, 0};
   }
-  if (from_b.value > margin_) return;
+  if (from_b.value > margin_) return false;
   const double sep_a = from_a.value, sep_b = from_b.value;
   const int edge_a = from_a.edge, edge_b = from_b.edge;
 
@@ -544,7 +562,7 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
     const Vec2 q1 = inc.vertex(inc_edge), q2 = inc.vertex(inc_edge + 1 < ni ? inc_edge + 1 : 0);  // no integer division
     const double s1 = (q1 - r1).dot(tr), s2 = (q2 - r1).dot(tr);
     const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(ref_length, std::max(s1, s2));
-    if (hi - lo <= 1e-9 * ref_length) return;
+    if (hi - lo <= 1e-9 * ref_length) return false;
     const double g1 = (q1 - r1).dot(normal), g2 = (q2 - r1).dot(normal);
     span = {lo, (hi - lo) / (points_ - 1), s1, g1, (g2 - g1) / (s2 - s1)};
   } else {
@@ -559,13 +577,13 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
       }
     }
     const double s = (inc.vertex(deepest) - r1).dot(tr);
-    if (s < 0 || s > ref_length) return;
+    if (s < 0 || s > ref_length) return false;
     const int next = deepest + 1 < ni ? deepest + 1 : 0, previous = deepest > 0 ? deepest - 1 : ni - 1;
     const double shorter = std::min((inc.vertex(next) - inc.vertex(deepest)).norm(),
                                     (inc.vertex(previous) - inc.vertex(deepest)).norm());
-    node_s_.assign(1, s);
-    node_gap_.assign(1, depth);
-    node_length_.assign(1, shorter / (2.0 * (points_ - 1)));
+    work.corner_s = s;
+    work.corner_gap = depth;
+    work.corner_length = shorter / (2.0 * (points_ - 1));
   }
 
   const Vec2 normal_ab = ref_on_a ? normal : Vec2(-normal);
@@ -606,13 +624,32 @@ void Engine::process_pair(int ia, int ib, int& contact_index) {
   if (static_cast<int>(contact.gap.size()) != count) contact.gap.resize(count);
 
   const bool gap_joint = has_gap_ && key == gap_key_;
-  const NodeLayout layout{r1, tr, normal, normal_ab, tangent_ab, ref_on_a, gap_joint};
-  if (edge_contact && group.plain && !gap_joint) {
-    process_plain_edge(a, b, contact, group.law, layout, span);
-  } else {
-    if (edge_contact) edge_nodes(span);
-    process_nodes(a, b, contact, group, layout, node_s_, node_gap_, node_length_);
+  work.a = ia;
+  work.b = ib;
+  work.contact = contact_index;
+  work.edge_contact = edge_contact;
+  work.layout = {r1, tr, normal, normal_ab, tangent_ab, ref_on_a, gap_joint};
+  work.span = span;
+  return true;
+}
+
+void Engine::pair_forces(const PairWork& work) {
+  Body& a = bodies_[work.a];
+  Body& b = bodies_[work.b];
+  Contact& contact = contacts_[work.contact];
+  const GroupLaw& group = groups_[contact.group];
+  if (work.edge_contact && group.plain && !work.layout.gap_joint) {
+    process_plain_edge(a, b, contact, group.law, work.layout, work.span);
+    return;
   }
+  if (work.edge_contact) {
+    edge_nodes(work.span);
+  } else {
+    node_s_.assign(1, work.corner_s);
+    node_gap_.assign(1, work.corner_gap);
+    node_length_.assign(1, work.corner_length);
+  }
+  process_nodes(a, b, contact, group, work.layout, node_s_, node_gap_, node_length_);
 }
 
 // An edge contact's nodes in the scratch arrays, for process_nodes: s along the face,
@@ -823,8 +860,13 @@ void Engine::compute_forces() {
 
   if (candidates_stale()) sweep_candidates();
   for (Contact& c : contacts_) c.seen = false;
+  work_.resize(candidates_.size());
+  std::size_t touching = 0;
   for (Candidate& c : candidates_)
-    if (boxes_within(bodies_[c.first], bodies_[c.second], margin_)) process_pair(c.first, c.second, c.contact);
+    if (boxes_within(bodies_[c.first], bodies_[c.second], margin_) &&
+        pair_geometry(c.first, c.second, c.contact, work_[touching]))
+      ++touching;
+  for (std::size_t i = 0; i < touching; ++i) pair_forces(work_[i]);
   first_step_ = false;
   for (Contact& c : contacts_) {
     c.active = c.seen;
