@@ -28,7 +28,6 @@ using nlohmann::json;
 
 using detail::build_scenes;
 using detail::case_curve_grid;
-using detail::finite_or_null;
 using detail::FitnessWorkers;
 using detail::identifiability;
 using detail::make_backend;

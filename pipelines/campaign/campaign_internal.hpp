@@ -23,8 +23,6 @@ namespace demcal::pipelines::detail {
 // A run whose curves can be scored: the engine finished it (collapse and step limit included).
 bool usable_status(const std::string& status);
 
-// The value, or null when it is NaN or infinite (JSON has no such numbers).
-nlohmann::json finite_or_null(double value);
 
 // Everything prepared before the first simulation, per case: the measured curve, the objective key
 // its fitness rows are archived under, objective 2's smoother, and the scene (engine backends only).

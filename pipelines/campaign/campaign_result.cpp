@@ -11,8 +11,6 @@ using nlohmann::json;
 
 namespace detail {
 
-json finite_or_null(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
-
 std::vector<ParameterSet> top_distinct(const std::vector<ParameterSet>& all, size_t count) {
   std::vector<const ParameterSet*> sorted;
   for (const auto& s : all)
@@ -70,19 +68,19 @@ json Identifiability::to_json() const {
     params[name] = {{"best", r.best}, {"min", r.min}, {"max", r.max}};
     if (r.min > 0) params[name]["max_over_min"] = r.max / r.min;
   }
-  return {{"relative_band", relative_band}, {"band_fitness", detail::finite_or_null(band_fitness)},
+  return {{"relative_band", relative_band}, {"band_fitness", finite_or_null(band_fitness)},
           {"sets_in_band", sets_in_band}, {"parameters", params}};
 }
 
 json CampaignResult::to_json() const {
   auto set_json = [](const ParameterSet& s) {
-    return json{{"params", params_json(s.params)}, {"fitness", detail::finite_or_null(s.fitness)},
+    return json{{"params", params_json(s.params)}, {"fitness", finite_or_null(s.fitness)},
                 {"iteration", s.iteration}, {"position", s.position}};
   };
   json top_json = json::array();
   for (const auto& s : top) top_json.push_back(set_json(s));
   json convergence = json::array();
-  for (double v : best_history) convergence.push_back(detail::finite_or_null(v));
+  for (double v : best_history) convergence.push_back(finite_or_null(v));
   json j = {{"status", status == CampaignStatus::completed ? "completed" : "failed"},
           {"message", message},
           {"best", set_json(best)},
@@ -101,9 +99,9 @@ json CampaignResult::to_json() const {
                       {"screened", surrogate_screened},
                       {"simulated", surrogate_simulated},
                       {"screened_out", surrogate_screened_out},
-                      {"cv_error", detail::finite_or_null(surrogate_cv_error)}};
+                      {"cv_error", finite_or_null(surrogate_cv_error)}};
   if (polished)
-    j["polish"] = {{"evaluations", polish_evaluations}, {"swarm_best_fitness", detail::finite_or_null(swarm_best_fitness)},
+    j["polish"] = {{"evaluations", polish_evaluations}, {"swarm_best_fitness", finite_or_null(swarm_best_fitness)},
                    {"status", polish_status}};
   return j;
 }

@@ -1,5 +1,7 @@
 #include "demcal/pipelines/predict.hpp"
 
+#include "campaign_internal.hpp"
+
 #include "demcal/pipelines/backend.hpp"
 #include "demcal/smoothing/objective.hpp"
 
@@ -10,15 +12,10 @@
 
 namespace demcal::pipelines {
 
+using detail::usable_status;
 using nlohmann::json;
 
 namespace {
-
-json finite_or_null(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
-
-bool usable_status(const std::string& status) {
-  return status == "completed" || status == "collapsed" || status == "step_limit";
-}
 
 // Largest force among the rows whose displacement lies in [lower, upper]; NaN rows skipped.
 std::pair<double, double> peak_in_window(const smoothing::XYSeries& s, double lower, double upper) {

@@ -50,8 +50,6 @@ std::string format(const char* pattern, double v) {
   return b;
 }
 
-json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-
 json statistics_json(const FitnessStatistics& s) {
   return {{"count", s.count}, {"mean", s.mean}, {"stddev", s.stddev}, {"median", s.median}, {"min", s.min}, {"max", s.max}};
 }

@@ -58,8 +58,6 @@ void DiagnoseOptions::Validate() const {
 
 namespace {
 
-json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-
 json params_json(const std::map<std::string, double>& params) {
   json j = json::object();
   for (const auto& [k, v] : params) j[k] = finite_or_null(v);

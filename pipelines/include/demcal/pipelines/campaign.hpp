@@ -41,6 +41,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <limits>
 #include <map>
 #include <memory>
@@ -51,6 +52,11 @@
 namespace demcal::pipelines {
 
 struct CurveGrid;
+
+// A number for JSON files: the value, or null when it is NaN or infinite (JSON has no such numbers).
+inline nlohmann::json finite_or_null(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
 
 // Bad campaign input; the message names the file and key (e.g. "c.json: parameters[1].lower: ...").
 class CampaignError : public std::runtime_error {
