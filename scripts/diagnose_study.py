@@ -6,7 +6,7 @@ well its parameters came back, and how far the error fell.
 
 usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5] [--first-seed 1]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
-                         [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--magnitude 1]
+                         [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--window measured] [--magnitude 1]
                          [--jobs 1]
 
 Each case and seed gets OUT_DIR/<case>/seed-<s>/ (measured.csv, campaign.json, the diagnosis in
@@ -75,7 +75,8 @@ def campaign(measured, args):
                        {"name": "friction_deg", "lower": 25, "upper": 45}],
         # by default the abutment gauge is not fitted (docs/diagnose.md): it is the check on data not
         # fitted; --fit-abutment fits it too
-        "objective": {"type": 1, "weights": {} if args.fit_abutment else {"abutment_horizontal": 0}},
+        "objective": {"type": 1, "weights": {} if args.fit_abutment else {"abutment_horizontal": 0},
+                      "window": args.window},
         "optimiser": {"algorithm": "tbpso", "population": 10, "iterations": 6, "seed": 1},
         "polish": {"algorithm": "LN_SBPLX", "max_evaluations": 20},
         "report": False,
@@ -157,6 +158,8 @@ def main():
     p.add_argument("--effects", default="all", help="effects the diagnosis considers")
     p.add_argument("--fit-abutment", action="store_true",
                    help="fit the abutment gauge's channel too (default: weight 0, a check on data not fitted)")
+    p.add_argument("--window", default="common", choices=["common", "measured"],
+                   help="the objective's displacement window per channel (docs/smoothing.md)")
     p.add_argument("--surrogate-kind", default="", help="the searches' surrogate (gp | mlp; default: demcal's)")
     p.add_argument("--magnitude", type=float, default=1.0,
                    help="strength of the hidden effects, x the study's default (detection limits; > 0)")

@@ -50,6 +50,7 @@ CurveGrid make_curve_grid(const smoothing::Curve& measured, const smoothing::Obj
   grid.force_column = objective.force_column;
   grid.points = points;
   grid.objective_points = objective.points;
+  grid.objective_window = objective.window;
   grid.case_weight = case_weight;
   for (const auto& column : smoothing::displacement_columns(measured, objective)) {
     const auto envelope = smoothing::loading_envelope(smoothing::series(measured, column, objective.force_column));
@@ -109,7 +110,8 @@ double curve_fitness(const Eigen::VectorXd& outputs, const std::vector<std::shar
     double f = 0;
     for (size_t c = 0; c < grid->channels.size(); ++c)
       f += grid->channels[c].weight *
-           smoothing::channel_misfit(grid->channels[c].measured, output_channel(outputs, offset, *grid, c), grid->objective_points);
+           smoothing::channel_misfit(grid->channels[c].measured, output_channel(outputs, offset, *grid, c), grid->objective_points,
+                                     grid->channels[c].column, grid->objective_window);
     fitness += grid->case_weight * f;
     offset += grid->size();
   }

@@ -71,6 +71,8 @@ PreparedCases prepare_cases(const CampaignConfig& config) {
                 {"points", config.objective_options.points},
                 {"weights", config.objective_options.channel_weights}};
     if (config.objective == 2) key["smoother"] = config.result_defining_json()["objective"]["smoother"];
+    if (config.objective_options.window != smoothing::ObjectiveWindow::common)
+      key["window"] = smoothing::to_string(config.objective_options.window);
     p.objective_keys.push_back(hash_text(key.dump()));
     try {
       smoothing::common_channels(p.measured.back(), p.measured.back(), config.objective_options);

@@ -416,6 +416,9 @@ json CampaignConfig::result_defining_json() const {
   }
   json objective_json = {{"type", objective}, {"points", objective_options.points},
                          {"weights", objective_options.channel_weights}};
+  // absent for the paper's window: older campaigns keep their keys
+  if (objective_options.window != smoothing::ObjectiveWindow::common)
+    objective_json["window"] = smoothing::to_string(objective_options.window);
   if (objective == 2) objective_json["smoother"] = smoother_to_json(smoother);
   json j = {{"cases", cases_json}, {"parameters", space.to_json()}, {"objective", objective_json},
             {"optimiser", optimiser_to_json(optimiser)}};
@@ -488,9 +491,18 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
     if (o.is_number_integer()) {
       c.objective = o.get<int>();
     } else {
-      reject_unknown_keys(o, {"type", "weights", "points", "smoother"}, where);
+      reject_unknown_keys(o, {"type", "weights", "points", "window", "smoother"}, where);
       read_field(o, "type", c.objective, where);
       read_field(o, "points", c.objective_options.points, where);
+      if (o.contains("window")) {
+        std::string window;
+        read_field(o, "window", window, where);
+        try {
+          c.objective_options.window = smoothing::parse_objective_window(window);
+        } catch (const std::invalid_argument& e) {
+          throw CampaignError(where + ".window: " + e.what());
+        }
+      }
       read_field(o, "weights", c.objective_options.channel_weights, where);
       if (o.contains("smoother")) parse_smoother(o.at("smoother"), c.smoother, where + ".smoother");
     }

@@ -42,8 +42,7 @@ void compare(const smoothing::Curve& measured, CasePrediction& p, const smoothin
   const auto sim = smoothing::series(p.simulated, channel, options.force_column);
   const auto exp_env = smoothing::loading_envelope(exp);
   const auto sim_env = smoothing::loading_envelope(sim);
-  p.window_lower = std::max(exp_env.x.front(), sim_env.x.front());
-  p.window_upper = std::min(exp_env.x.back(), sim_env.x.back());
+  std::tie(p.window_lower, p.window_upper) = smoothing::objective_window(exp_env, sim_env, options.window, channel);
   std::tie(p.measured_peak, p.measured_peak_displacement) = peak_in_window(exp, p.window_lower, p.window_upper);
   std::tie(p.simulated_peak, p.simulated_peak_displacement) = peak_in_window(sim, p.window_lower, p.window_upper);
   if (std::isfinite(p.measured_peak) && p.measured_peak != 0)

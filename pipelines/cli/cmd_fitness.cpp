@@ -17,6 +17,7 @@ struct FitnessArgs {
   std::vector<std::string> weights;  // name=value
   int objective = 1;
   int points = 200;
+  std::string window = "common";
   std::uint64_t seed = 1;
 };
 
@@ -24,6 +25,7 @@ void run_fitness(const FitnessArgs& a) {
   using namespace demcal::smoothing;
   ObjectiveOptions options;
   options.points = a.points;
+  options.window = parse_objective_window(a.window);  // checked by CLI11 already
   options.force_column = a.force_column;
   options.ignored_columns = a.ignored;
   for (const auto& w : a.weights) {
@@ -70,6 +72,10 @@ void setup(CLI::App& app) {
   sub->add_option("--ignore", args->ignored, "Columns that are neither force nor displacement (default: time)");
   sub->add_option("--weight", args->weights, "Channel weight COLUMN=VALUE (default 1 each)");
   sub->add_option("--points", args->points, "Evaluation points per channel")->check(CLI::Range(2, 1000000));
+  sub->add_option("--window", args->window,
+                  "Displacement window per channel: common (the paper's, both curves' shared range) or measured "
+                  "(the experiment's range; the simulation held at its end values beyond its own)")
+      ->check(CLI::IsMember({"common", "measured"}));
   sub->add_option("--seed", args->seed, "Seed of the smoothing networks (objective 2)");
   sub->callback([args] { run_fitness(*args); });
 }

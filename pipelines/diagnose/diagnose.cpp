@@ -149,7 +149,7 @@ class CaseRunner {
           // not fitted: a check of the fit, on its own grid
           try {
             ChannelResidual r = analyse_channel(smoothing::series(measured, ch, config.objective_options.force_column),
-                                                sim, config.objective_options.points);
+                                                sim, config.objective_options.points, config.objective_options.window);
             r.case_name = p.name;
             r.channel = ch;
             e.held_out.push_back(std::move(r));
@@ -167,7 +167,7 @@ class CaseRunner {
           r = resimulated((*grid)[g++], sim);
         } else {
           r = analyse_channel(smoothing::series(measured, ch, config.objective_options.force_column), sim,
-                              config.objective_options.points);
+                              config.objective_options.points, config.objective_options.window);
         }
         r.case_name = p.name;
         r.channel = ch;

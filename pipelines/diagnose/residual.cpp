@@ -137,14 +137,13 @@ void complete_residual(ChannelResidual& c) {
   c.effective_points = std::clamp(static_cast<double>(n) * (1 - rho) / (1 + rho), 1.0, static_cast<double>(n));
 }
 
-ChannelResidual analyse_channel(const XYSeries& measured, const XYSeries& simulated, int points) {
+ChannelResidual analyse_channel(const XYSeries& measured, const XYSeries& simulated, int points,
+                                smoothing::ObjectiveWindow window) {
   if (points < 4) throw smoothing::CurveError("residual analysis needs at least 4 grid points");
   const XYSeries m = smoothing::loading_envelope(measured), s = smoothing::loading_envelope(simulated);
   if (m.x.size() < 2 || s.x.size() < 2)
     throw smoothing::CurveError("residual analysis: a curve has fewer than two loading points");
-  const double lower = std::max(m.x.front(), s.x.front()), upper = std::min(m.x.back(), s.x.back());
-  if (!(upper > lower))
-    throw smoothing::CurveError("residual analysis: the measured and simulated curves share no displacement window");
+  const auto [lower, upper] = smoothing::objective_window(m, s, window, "residual analysis");
 
   ChannelResidual c;
   const auto n = static_cast<std::size_t>(points);

@@ -27,6 +27,14 @@ std::string fmt(double v) {
 
 }  // namespace
 
+std::string to_string(ObjectiveWindow window) { return window == ObjectiveWindow::common ? "common" : "measured"; }
+
+ObjectiveWindow parse_objective_window(const std::string& name) {
+  if (name == "common") return ObjectiveWindow::common;
+  if (name == "measured") return ObjectiveWindow::measured;
+  throw std::invalid_argument("'" + name + "': must be \"common\" or \"measured\"");
+}
+
 void ObjectiveOptions::Validate() const {
   if (points < 2)
     throw std::invalid_argument("ObjectiveOptions.points = " + std::to_string(points) + ": must be >= 2");
@@ -69,8 +77,19 @@ double interpolate(const XYSeries& e, double x) {
   return e.y[i - 1] + t * (e.y[i] - e.y[i - 1]);
 }
 
+std::pair<double, double> objective_window(const XYSeries& e, const XYSeries& s, ObjectiveWindow window,
+                                           const std::string& label) {
+  const bool common = window == ObjectiveWindow::common;
+  const double lower = common ? std::max(e.x.front(), s.x.front()) : e.x.front();
+  const double upper = common ? std::min(e.x.back(), s.x.back()) : e.x.back();
+  if (!(upper > lower))
+    throw CurveError(label + ": displacement ranges do not overlap (experiment [" + fmt(e.x.front()) + ", " +
+                     fmt(e.x.back()) + "], simulation [" + fmt(s.x.front()) + ", " + fmt(s.x.back()) + "])");
+  return {lower, upper};
+}
+
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
-                      const std::string& label) {
+                      const std::string& label, ObjectiveWindow window) {
   if (points < 2) throw std::invalid_argument("channel_misfit: points must be >= 2");
   const XYSeries e = loading_envelope(experiment);
   const XYSeries s = loading_envelope(simulation);
@@ -78,12 +97,7 @@ double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, in
     throw CurveError(label + ": the experiment has fewer than 2 loading points (finite, increasing displacement)");
   if (s.x.size() < 2)
     throw CurveError(label + ": the simulation has fewer than 2 loading points (finite, increasing displacement)");
-  const double lower = std::max(e.x.front(), s.x.front());
-  const double upper = std::min(e.x.back(), s.x.back());
-  if (!(upper > lower))
-    throw CurveError(label + ": displacement ranges do not overlap (experiment [" + fmt(e.x.front()) +
-                     ", " + fmt(e.x.back()) + "], simulation [" + fmt(s.x.front()) + ", " +
-                     fmt(s.x.back()) + "])");
+  const auto [lower, upper] = objective_window(e, s, window, label);
   double sum = 0;
   for (int k = 0; k < points; ++k) {
     const double w = k == points - 1 ? upper : lower + (upper - lower) * k / (points - 1);
@@ -198,7 +212,7 @@ FitnessResult objective1(const Curve& experiment, const Curve& simulation, const
   for (const auto& c : channels)
     values[c] = channel_misfit(series(experiment, c, options.force_column),
                                series(simulation, c, options.force_column), options.points,
-                               channel_label(experiment, simulation, c));
+                               channel_label(experiment, simulation, c), options.window);
   return combine(values, options);
 }
 
@@ -239,7 +253,7 @@ std::vector<FitnessResult> Objective2::evaluate_batch(const std::vector<Curve>& 
       const auto& r = smoothed[next++];
       const std::string label = channel_label(experiment_, simulations[i], c);
       if (r.status != SmoothStatus::ok) throw CurveError(label + ": cannot smooth the simulation: " + r.message);
-      values[c] = channel_misfit(smoothed_experiment_.at(c), r.smoothed, objective_.points, label);
+      values[c] = channel_misfit(smoothed_experiment_.at(c), r.smoothed, objective_.points, label, objective_.window);
     }
     out.push_back(combine(values, objective_));
   }

@@ -169,6 +169,9 @@ TEST(Campaign, BadInputGivesMessagesNamingTheProblem) {
   auto bad_objective = base;
   bad_objective["objective"] = 3;
   expect_error(bad_objective, "objective");
+  auto bad_window = base;
+  bad_window["objective"] = {{"type", 1}, {"window", "shared"}};
+  expect_error(bad_window, "objective.window: 'shared'");
   auto unknown_parameter = base;
   unknown_parameter["backend"] = "threads";
   unknown_parameter["scene"] = {{"generator", "arch"}, {"options", {{"contacts_per_joint", 3}}}};

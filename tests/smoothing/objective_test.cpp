@@ -104,6 +104,36 @@ TEST(Objective1, Errors) {
   EXPECT_THROW(points(1).Validate(), std::invalid_argument);
 }
 
+TEST(Objective1, MeasuredWindowScoresAGaugeThatHardlyMovesOverTheWholeMeasuredRange) {
+  // A second gauge measured from 0 to 4 under a force equal to its displacement; in the run it
+  // follows to 0.01 and comes back while the force rises the same way (the load point's channel
+  // matches exactly).
+  const std::vector<double> w = {0, 0.01, 1, 2, 3, 4};
+  const Curve e = curve("e.csv", {{"force", "", w}, {"dv", "", w}, {"dh", "", w}});
+  const Curve s = curve("s.csv", {{"force", "", w}, {"dv", "", w}, {"dh", "", {0, 0.01, 0, 0, 0, 0}}});
+  // The paper's window is [0, 0.01] on dh, where the two agree: a perfect score.
+  EXPECT_DOUBLE_EQ(objective1(e, s, points(5)).fitness, 0.0);
+  // The measured window is [0, 4]; the run is held at its last envelope point (0.01, 0.01) beyond:
+  // w = 0, 1, 2, 3, 4 against 0, 0.01, 0.01, 0.01, 0.01.
+  ObjectiveOptions measured = points(5);
+  measured.window = ObjectiveWindow::measured;
+  const auto r = objective1(e, s, measured);
+  EXPECT_DOUBLE_EQ(r.channels.at("dv"), 0.0);
+  EXPECT_NEAR(r.channels.at("dh"), std::sqrt(0.99 * 0.99 + 1.99 * 1.99 + 2.99 * 2.99 + 3.99 * 3.99), 1e-12);
+  // A run that reaches further is scored over the measured range alone, as with the paper's window.
+  const Curve longer = curve("s.csv", {{"force", "", {0, 1, 2, 3, 4, 9}}, {"dv", "", {0, 1, 2, 3, 4, 5}}, {"dh", "", {0, 1, 2, 3, 4, 5}}});
+  EXPECT_DOUBLE_EQ(objective1(e, longer, measured).fitness, 0.0);
+  EXPECT_DOUBLE_EQ(objective1(e, longer, points(5)).fitness, 0.0);
+  EXPECT_EQ(parse_objective_window("measured"), ObjectiveWindow::measured);
+  EXPECT_EQ(to_string(parse_objective_window("common")), "common");
+  try {
+    parse_objective_window("shared");
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'shared'"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Objective1, ACollapsedRunIsContinuedAtZeroForceToTheMeasuredEnd) {
   // The test holds 1 from w = 1 to 4; the run matches it, then collapses at w = 1.
   const Curve e = curve("e.csv", {{"time", "s", {0, 1, 2, 3, 4}}, {"force", "", {0, 1, 1, 1, 1}}, {"dv", "", {0, 1, 2, 3, 4}}});

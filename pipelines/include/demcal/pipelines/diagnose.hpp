@@ -79,10 +79,10 @@ struct ChannelResidual {
   nlohmann::json to_json() const;        // the numbers, not the arrays
 };
 
-// Residual of one channel; throws smoothing::CurveError when a series has fewer than two envelope
-// points or the two windows do not overlap.
+// Residual of one channel on the objective's grid (`points` over its window); throws
+// smoothing::CurveError when a series has fewer than two envelope points or the window is empty.
 ChannelResidual analyse_channel(const smoothing::XYSeries& measured, const smoothing::XYSeries& simulated,
-                                int points);
+                                int points, smoothing::ObjectiveWindow window = smoothing::ObjectiveWindow::common);
 
 // Recomputes a residual's statistics (bias, trend, rms, regions, autocorrelation, effective
 // points) from its displacement, measured and simulated arrays; keeps its noise.

@@ -34,6 +34,7 @@ struct CurveGrid {
   std::string force_column = "force";
   int points = 40;                    // grid points per channel, >= 2
   int objective_points = 200;         // the objective's evaluation points
+  smoothing::ObjectiveWindow objective_window = smoothing::ObjectiveWindow::common;  // and its window
   double case_weight = 1;
   Eigen::Index size() const { return static_cast<Eigen::Index>(channels.size()) * (points + 1); }
   double displacement(const Channel& c, int k) const {

@@ -10,8 +10,12 @@
 //      kept only where w exceeds every earlier w, and a point at the same w as the last kept point
 //      replaces it, so the latest force at a repeated displacement counts). Unloading, cycles and
 //      snap-back therefore do not enter the fitness: the monotonic loading branch is compared.
-//   2. window: lower = max(min w_exp, min w_sim), upper = min(max w_exp, max w_sim); error if upper
-//      <= lower (the curves share no displacement range).
+//   2. window (ObjectiveWindow): `common` (the paper's eqs. 16–17, the default): lower = max(min
+//      w_exp, min w_sim), upper = min(max w_exp, max w_sim); error if upper <= lower (the curves
+//      share no displacement range). `measured`: [min w_exp, max w_exp], the simulated envelope held
+//      at its end forces where it does not reach. With `common`, a simulated gauge that hardly moves
+//      shrinks its channel's window to a sliver of the measured range, over which it matches: a fit
+//      that keeps a gauge still scores near zero on that gauge (docs/smoothing.md).
 //   3. `points` (200) evenly spaced w in [lower, upper], both ends included; F_exp and F_sim
 //      linearly interpolated there.
 //   4. f_c = sqrt(sum_k (F_exp,k - F_sim,k)^2).
@@ -29,8 +33,18 @@
 
 namespace demcal::smoothing {
 
+// The displacement window of each channel (step 2 above).
+enum class ObjectiveWindow {
+  common,    // the range both loading envelopes share (paper, eqs. 16–17)
+  measured,  // the measured envelope's range; the simulation held at its end forces beyond its own
+};
+std::string to_string(ObjectiveWindow window);
+// "common" or "measured"; throws std::invalid_argument naming the value otherwise.
+ObjectiveWindow parse_objective_window(const std::string& name);
+
 struct ObjectiveOptions {
   int points = 200;                                   // evaluation points per channel, >= 2
+  ObjectiveWindow window = ObjectiveWindow::common;
   std::map<std::string, double> channel_weights;      // per displacement column; absent = 1, >= 0
   std::string force_column = "force";
   std::vector<std::string> ignored_columns = {"time"};  // neither force nor displacement
@@ -56,10 +70,15 @@ XYSeries loading_envelope(const XYSeries& series);
 // Linear interpolation of a strictly increasing series at x (clamped to the end values outside).
 double interpolate(const XYSeries& envelope, double x);
 
+// Step 2's window [lower, upper] of two loading envelopes. Throws CurveError (naming `label`) when
+// it is empty (with `common`: the ranges do not overlap).
+std::pair<double, double> objective_window(const XYSeries& experiment_envelope, const XYSeries& simulation_envelope,
+                                           ObjectiveWindow window, const std::string& label = "channel");
+
 // f_c of one channel from two series (steps 1–4). Throws CurveError (naming `label`) when a series
-// has fewer than 2 envelope points or the windows do not overlap.
+// has fewer than 2 envelope points or the window is empty.
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
-                      const std::string& label = "channel");
+                      const std::string& label = "channel", ObjectiveWindow window = ObjectiveWindow::common);
 
 // The largest displacement of each displacement column's loading envelope (column -> x); columns
 // with fewer than 2 envelope points are left out.
