@@ -589,8 +589,11 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
   }
 }
 
-void select(Diagnosis& d, const DiagnoseOptions& options) {
-  std::vector<EffectCandidate*> accepted;
+
+}  // namespace
+
+void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
+  std::vector<EffectCandidate*> accepted, short_of_criterion;
   for (auto& c : d.candidates) {
     if (!c.tried) continue;
     if (!std::isfinite(c.score)) {
@@ -609,6 +612,7 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
       c.verdict = "rejected";
       c.reason = "the fit does not improve enough for its extra parameters (criterion change " +
                  format_number(c.score) + ", needs < -" + format_number(options.evidence_threshold) + ")";
+      short_of_criterion.push_back(&c);
     }
   }
   std::sort(accepted.begin(), accepted.end(), [](auto* a, auto* b) { return a->score < b->score; });
@@ -623,6 +627,35 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
     }
   }
   const double noise = overall_noise(d.base_residuals);
+  // One effect passes, but another fits the curves better by more than the noise without passing
+  // (its remaining residual is smooth, so it earns few independent points): both explain part of
+  // the residual, and the criterion alone would name the worse fit. The data cannot tell them apart.
+  std::vector<EffectCandidate*> better_fits;
+  if (tied.size() == 1)
+    for (auto* c : short_of_criterion)
+      if (std::isfinite(c->error) && c->error < tied.front()->error - noise) better_fits.push_back(c);
+  if (!better_fits.empty()) {
+    auto* passing = tied.front();
+    std::string names;
+    for (auto* c : better_fits) {
+      c->verdict = "tied";
+      c->reason = "fits the curves better than " + passing->effect + " (error " + format_number(c->error) +
+                  " against " + format_number(passing->error) + " N) but does not pass the criterion (" +
+                  format_number(c->score) + "): its remaining residual is smooth";
+      names += ", " + c->effect + " (" + format_number(c->error) + " N, criterion " + format_number(c->score) + ")";
+    }
+    passing->verdict = "tied";
+    passing->reason = "passes the criterion (" + format_number(passing->score) + ") but fits the curves less well than" +
+                      names;
+    d.chosen.clear();
+    d.error_after = d.error_before;
+    d.verdict = "The data cannot tell which effect is missing: " + passing->effect + " passes the criterion (error " +
+                format_number(d.error_before) + " -> " + format_number(passing->error) + " N, criterion " +
+                format_number(passing->score) + "), but the fit with" + names +
+                " comes closer to the curves without passing it. Each explains part of the residual and neither "
+                "reaches the noise (about " + format_number(noise) + " N); the model is not extended.";
+    return;
+  }
   if (tied.size() == 1) {
     auto* c = tied.front();
     c->verdict = "accepted";
@@ -658,8 +691,6 @@ void select(Diagnosis& d, const DiagnoseOptions& options) {
   }
 }
 
-}  // namespace
-
 ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeries& simulated) {
   ChannelResidual r = base;
   const auto envelope = smoothing::loading_envelope(simulated);
@@ -667,6 +698,19 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   for (std::size_t i = 0; i < r.displacement.size(); ++i) r.simulated[i] = smoothing::interpolate(envelope, r.displacement[i]);
   complete_residual(r);
   return r;
+}
+
+std::string narrow_window_note(const Diagnosis& d) {
+  std::string narrow;
+  for (const auto& r : d.base_residuals) {
+    if (!(r.coverage < kNarrowWindow)) continue;
+    narrow += (narrow.empty() ? "" : ", ") + r.case_name + "/" + r.channel + " over " +
+              format_number(100 * r.coverage, 2) + " %";
+  }
+  if (narrow.empty()) return "";
+  return " The base fit is compared with part of the measured range only: " + narrow +
+         " (its gauge stops short in the simulation, and a gauge that hardly moves matches over what it reaches). "
+         "Set \"objective\": {\"window\": \"measured\"} to compare every channel over its measured range.";
 }
 
 std::string unfitted_data_note(const Diagnosis& d) {
@@ -918,7 +962,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
                 "scatter (RMS force error " + format_number(d.error_before) + " N; noise about " + format_number(noise) +
                 " N, scatter of the simulated curve about " + format_number(scatter) + " N)." + unfitted_data_note(d);
   } else {
-    select(d, options);
+    select_effect(d, options);
     if (options.bound_parameters) {
       std::vector<std::string> bounds;  // of the chosen effect, for the verdict
       for (auto& c : d.candidates) {
@@ -935,6 +979,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       }
     }
   }
+  d.verdict += narrow_window_note(d);
   d.simulations = runner.simulations();
   d.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   {

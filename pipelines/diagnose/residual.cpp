@@ -70,6 +70,7 @@ json ChannelResidual::to_json() const {
           {"rms", rms},
           {"rms_over_noise", finite_or_null(rms / noise)},
           {"peak_displacement", peak_displacement},
+          {"coverage", coverage},
           {"regions", regions_json},
           {"autocorrelation", autocorrelation},
           {"effective_points", effective_points}};
@@ -146,6 +147,7 @@ ChannelResidual analyse_channel(const XYSeries& measured, const XYSeries& simula
   const auto [lower, upper] = smoothing::objective_window(m, s, window, "residual analysis");
 
   ChannelResidual c;
+  c.coverage = m.x.back() > m.x.front() ? (upper - lower) / (m.x.back() - m.x.front()) : 1.0;
   const auto n = static_cast<std::size_t>(points);
   c.displacement.resize(n);
   c.measured.resize(n);

@@ -193,6 +193,69 @@ TEST(Evidence, ANoEffectVerdictNamesHeldOutDataTheBaseFitMisses) {
   EXPECT_EQ(note.find("check/load_vertical"), std::string::npos) << note;
 }
 
+// A simulated gauge that stops at a quarter of the measured range: the paper's window covers that
+// quarter, which the verdict reports; the measured window covers it all, the rest held at the end.
+TEST(Residual, AWindowShortOfTheMeasuredRangeIsReported) {
+  const auto measured = sampled(1200, 0, 1);  // 0 to 12 mm
+  smoothing::XYSeries short_run;
+  for (std::size_t i = 0; i < measured.x.size(); ++i)
+    if (measured.x[i] <= 3e-3) {
+      short_run.x.push_back(measured.x[i]);
+      short_run.y.push_back(measured.y[i]);
+    }
+  ChannelResidual common = analyse_channel(measured, short_run, 200);
+  EXPECT_NEAR(common.coverage, 0.25, 0.01);
+  EXPECT_NEAR(common.rms, 0, 1e-9);  // it matches over the part it reaches
+  const ChannelResidual whole = analyse_channel(measured, short_run, 200, smoothing::ObjectiveWindow::measured);
+  EXPECT_DOUBLE_EQ(whole.coverage, 1.0);
+  EXPECT_GT(whole.rms, 100);
+  Diagnosis d;
+  common.case_name = "main";
+  common.channel = "abutment_horizontal";
+  d.base_residuals = {whole};
+  EXPECT_EQ(narrow_window_note(d), "");
+  d.base_residuals.push_back(common);
+  const std::string note = narrow_window_note(d);
+  EXPECT_NE(note.find("main/abutment_horizontal over 25"), std::string::npos) << note;
+  EXPECT_NE(note.find("\"window\": \"measured\""), std::string::npos) << note;
+}
+
+// The friction-softening measurement of docs/diagnose.md ("The measured window"), seed 1: cohesion
+// passes the criterion with 565 N, friction softening falls short of it (its residual still smooth)
+// with 429 N: the criterion alone would name the worse fit, so neither is chosen.
+TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
+  Diagnosis d;
+  d.error_before = 846;
+  ChannelResidual base;
+  base.noise = 57;
+  d.base_residuals = {base};
+  auto candidate = [](const std::string& effect, double error, double score) {
+    EffectCandidate c;
+    c.effect = effect;
+    c.tried = true;
+    c.error = error;
+    c.score = score;
+    c.params = {{"cohesion", 7e4}, {"tensile_strength", 1.3e3}};
+    return c;
+  };
+  d.candidates = {candidate("crushing-cap", 465, -3.1), candidate("friction-softening", 429, -3.4),
+                  candidate("cohesion", 565, -10.9)};
+  const DiagnoseOptions options;
+  select_effect(d, options);
+  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
+  EXPECT_EQ(d.error_after, d.error_before);
+  for (const auto& c : d.candidates) EXPECT_EQ(c.verdict, "tied") << c.effect << ": " << c.reason;
+  EXPECT_NE(d.verdict.find("cannot tell"), std::string::npos) << d.verdict;
+  EXPECT_NE(d.verdict.find("friction-softening (429 N"), std::string::npos) << d.verdict;
+  // A better fit within the noise of the passing one does not stop it.
+  d.candidates = {candidate("friction-softening", 530, -3.4), candidate("cohesion", 565, -10.9)};
+  d.chosen.clear();
+  select_effect(d, options);
+  EXPECT_EQ(d.chosen, std::vector<std::string>{"cohesion"}) << d.verdict;
+  EXPECT_EQ(d.candidates[0].verdict, "rejected");
+  EXPECT_EQ(d.error_after, 565);
+}
+
 TEST(Evidence, ParameterBoundsAreTheNearestRuledOutValues) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   // ruled out on both sides, more strongly farther out

@@ -74,6 +74,7 @@ struct ChannelResidual {
   std::vector<ResidualRegion> regions; // initial, to_peak, after_peak
   double autocorrelation = 0;          // lag-1 autocorrelation of the residual on the grid
   double effective_points = 0;         // n (1 - rho) / (1 + rho), clamped to [1, n]
+  double coverage = 1;                 // the window's share of the measured envelope's displacement range
 
   std::vector<double> residual() const;  // measured - simulated
   nlohmann::json to_json() const;        // the numbers, not the arrays
@@ -278,6 +279,21 @@ HeldOutCheck check_held_out(const EffectCandidate& candidate, const Diagnosis& d
 // base fit misses (not in diagnosis.held_out_checked), with their RMS error against their noise,
 // since an effect may show only in data the fits did not use. "" when there are none.
 std::string unfitted_data_note(const Diagnosis& diagnosis);
+
+// A sentence for the verdict on the base fit's fitted channels whose window covers less than
+// `kNarrowWindow` of the measured range (possible with the paper's window only: the simulated gauge
+// stopped short, and a gauge that hardly moves matches there), recommending the measured window.
+// "" when there are none.
+constexpr double kNarrowWindow = 0.5;
+std::string narrow_window_note(const Diagnosis& diagnosis);
+
+// Step 5, the verdict from the tried candidates (their score, error and held-out errors) and the
+// base residuals (their noise): each candidate's verdict and reason, diagnosis.chosen, error_after
+// and verdict. Accepted: criterion change below -evidence_threshold, error below the base's, and
+// the held-out data not spoilt; two accepted within tie_margin are tied; one accepted while a
+// candidate short of the criterion fits the curves better by more than the noise: both tied (the
+// criterion would name the worse fit). None: no effect needed.
+void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // Runs the loop on a campaign (the same file `demcal calibrate` takes). Throws CampaignError for
 // bad input found before the first simulation; failed candidate calibrations become "rejected"
