@@ -684,10 +684,25 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   } else {
     d.chosen.clear();
     d.error_after = d.error_before;
-    d.verdict = "No effect needed: none of the candidate effects explains the residual better than its extra "
-                "parameters cost (RMS force error " + format_number(d.error_before) + " N, noise about " +
-                format_number(noise) + " N, simulation scatter about " + format_number(overall(d.scatter)) + " N)." +
-                unfitted_data_note(d);
+    const double scatter = overall(d.scatter);
+    const double floor = std::hypot(noise, std::isfinite(scatter) ? scatter : 0.0);
+    const std::string errors = "RMS force error " + format_number(d.error_before) + " N, noise about " +
+                               format_number(noise) + " N, simulation scatter about " + format_number(scatter) + " N";
+    const EffectCandidate* closest = nullptr;
+    for (const auto* c : short_of_criterion)
+      if (closest == nullptr || c->error < closest->error) closest = c;
+    if (closest != nullptr && d.error_before > kUnexplainedRatio * floor) {
+      // far above the noise: the model lacks something, which "no effect needed" would hide
+      d.verdict = "No effect found: the base fit misses the curves by " + format_number(d.error_before / floor, 2) +
+                  " x the noise and scatter combined (" + errors + "), so the model lacks something, but none of the "
+                  "candidate effects explains enough of it for its extra parameters (closest: " + closest->effect +
+                  ", " + format_number(d.error_before) + " -> " + format_number(closest->error) + " N, criterion " +
+                  format_number(closest->score) + "). The missing effect is not among those tried, or their searches "
+                  "did not reach its fit (more --candidate-simulations)." + unfitted_data_note(d);
+    } else {
+      d.verdict = "No effect needed: none of the candidate effects explains the residual better than its extra "
+                  "parameters cost (" + errors + ")." + unfitted_data_note(d);
+    }
   }
 }
 

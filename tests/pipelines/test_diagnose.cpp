@@ -254,6 +254,17 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
   EXPECT_EQ(d.chosen, std::vector<std::string>{"cohesion"}) << d.verdict;
   EXPECT_EQ(d.candidates[0].verdict, "rejected");
   EXPECT_EQ(d.error_after, 565);
+  // None passes, with the base 15 x its noise: the model lacks something; the closest fit is named.
+  d.candidates = {candidate("friction-softening", 450, -4.8), candidate("cohesion", 645, -0.4)};
+  select_effect(d, options);
+  EXPECT_TRUE(d.chosen.empty());
+  EXPECT_NE(d.verdict.find("No effect found"), std::string::npos) << d.verdict;
+  EXPECT_NE(d.verdict.find("closest: friction-softening, 846 -> 450 N"), std::string::npos) << d.verdict;
+  // Near the noise, the same candidates leave nothing to explain.
+  d.error_before = 100;
+  d.candidates = {candidate("friction-softening", 95, -1), candidate("cohesion", 98, -0.4)};
+  select_effect(d, options);
+  EXPECT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
 }
 
 TEST(Evidence, ParameterBoundsAreTheNearestRuledOutValues) {

@@ -292,7 +292,10 @@ std::string narrow_window_note(const Diagnosis& diagnosis);
 // and verdict. Accepted: criterion change below -evidence_threshold, error below the base's, and
 // the held-out data not spoilt; two accepted within tie_margin are tied; one accepted while a
 // candidate short of the criterion fits the curves better by more than the noise: both tied (the
-// criterion would name the worse fit). None: no effect needed.
+// criterion would name the worse fit). None: "No effect needed", or "No effect found" when the
+// base error exceeds kUnexplainedRatio x the noise and scatter combined and a candidate was fitted
+// (the model lacks something the candidates do not supply; the closest is named).
+constexpr double kUnexplainedRatio = 2;
 void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // Runs the loop on a campaign (the same file `demcal calibrate` takes). Throws CampaignError for
