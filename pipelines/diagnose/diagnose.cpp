@@ -589,7 +589,6 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
   }
 }
 
-
 }  // namespace
 
 void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
