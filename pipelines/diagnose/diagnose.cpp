@@ -641,18 +641,19 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
       c->reason = "fits the curves better than " + passing->effect + " (error " + format_number(c->error) +
                   " against " + format_number(passing->error) + " N) but does not pass the criterion (" +
                   format_number(c->score) + "): its remaining residual is smooth";
-      names += ", " + c->effect + " (" + format_number(c->error) + " N, criterion " + format_number(c->score) + ")";
+      names += (names.empty() ? "" : " and ") + c->effect + " (" + format_number(c->error) + " N, criterion " +
+               format_number(c->score) + ")";
     }
     passing->verdict = "tied";
-    passing->reason = "passes the criterion (" + format_number(passing->score) + ") but fits the curves less well than" +
+    passing->reason = "passes the criterion (" + format_number(passing->score) + ") but fits the curves less well than " +
                       names;
     d.chosen.clear();
     d.error_after = d.error_before;
     d.verdict = "The data cannot tell which effect is missing: " + passing->effect + " passes the criterion (error " +
                 format_number(d.error_before) + " -> " + format_number(passing->error) + " N, criterion " +
-                format_number(passing->score) + "), but the fit with" + names +
-                " comes closer to the curves without passing it. Each explains part of the residual and neither "
-                "reaches the noise (about " + format_number(noise) + " N); the model is not extended.";
+                format_number(passing->score) + "), but " + names + (better_fits.size() > 1 ? " come" : " comes") +
+                " closer to the curves without passing it. Each explains part of the residual and none reaches the "
+                "noise (about " + format_number(noise) + " N); the model is not extended.";
     return;
   }
   if (tied.size() == 1) {
