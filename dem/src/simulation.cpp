@@ -241,7 +241,6 @@ class Engine {
   std::vector<Candidate> candidates_;
   std::vector<Vec2> swept_min_, swept_max_;  // each body's box at the last sweep
   double skin_ = 0;
-  long sweeps_ = 0;
   std::vector<std::pair<int, int>> pairs_;
   std::vector<PairWork> work_;  // this step's touching pairs, in candidate order
   std::vector<int> order_;
@@ -727,9 +726,9 @@ void Engine::apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, 
 
 // The node loop, node by node: a corner contact's single node, a joint group with effects on
 // (EffectLaw and its node history), or the gap joint (whose group may be plain).
-void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& group,
-                                        const NodeLayout& layout, const std::vector<double>& s_nodes,
-                                        const std::vector<double>& gaps, const std::vector<double>& lengths) {
+void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& group, const NodeLayout& layout,
+                           const std::vector<double>& s_nodes, const std::vector<double>& gaps,
+                           const std::vector<double>& lengths) {
   const int count = static_cast<int>(s_nodes.size());
   const bool plain = group.plain;
   double slip_weighted = 0, length_total = 0;
@@ -830,7 +829,6 @@ void Engine::sweep_candidates() {
     swept_min_[i] = bodies_[i].box_min;
     swept_max_[i] = bodies_[i].box_max;
   }
-  ++sweeps_;
 }
 
 void Engine::compute_forces() {

@@ -64,15 +64,16 @@ std::shared_ptr<const CurveGrid> case_curve_grid(const CampaignConfig& config, c
 
 PreparedCases prepare_cases(const CampaignConfig& config) {
   PreparedCases p;
+  const json defining = config.result_defining_json();  // hashes every file: once, not per case
+  const json& objective = defining["objective"];
   for (const auto& c : config.cases) {
     p.measured.push_back(load_measured(c.measured));
-    json key = {{"measured", config.result_defining_json()["cases"][p.measured.size() - 1]["measured"]},
+    json key = {{"measured", defining["cases"][p.measured.size() - 1]["measured"]},
                 {"objective", config.objective},
                 {"points", config.objective_options.points},
                 {"weights", config.objective_options.channel_weights}};
-    if (config.objective == 2) key["smoother"] = config.result_defining_json()["objective"]["smoother"];
-    if (config.objective_options.window != smoothing::ObjectiveWindow::common)
-      key["window"] = smoothing::to_string(config.objective_options.window);
+    for (const char* optional : {"smoother", "window"})  // as the result-defining JSON has them
+      if (objective.contains(optional)) key[optional] = objective[optional];
     p.objective_keys.push_back(hash_text(key.dump()));
     try {
       smoothing::common_channels(p.measured.back(), p.measured.back(), config.objective_options);
