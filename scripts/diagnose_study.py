@@ -7,7 +7,7 @@ well its parameters came back, and how far the error fell.
 usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5] [--first-seed 1]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
                          [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--window measured] [--magnitude 1]
-                         [--jobs 1]
+                         [--every 5] [--match-sampling] [--jobs 1]
 
 Each case and seed gets OUT_DIR/<case>/seed-<s>/ (measured.csv, campaign.json, the diagnosis in
 diag/). A finished diagnosis (diag/diagnosis.json) is read, not run again, so the study resumes.
@@ -64,11 +64,15 @@ CASES = ["none", "support-compliance", "friction-softening", "joint-closure", "c
 
 
 def campaign(measured, args):
+    scene_options = {"contacts_per_joint": args.contacts_per_joint, "velocity": args.velocity,
+                     "max_displacement": args.max_displacement}
+    if args.match_sampling:
+        # the simulation recorded where the measurement was: its rows are every `every`-th of a
+        # record at the generator's default interval (max_displacement / 1200)
+        scene_options["record_interval"] = args.every * args.max_displacement / 1200
     return {
         "name": "diagnose-study",
-        "scene": {"generator": "arch", "options": {"contacts_per_joint": args.contacts_per_joint,
-                                                   "velocity": args.velocity,
-                                                   "max_displacement": args.max_displacement}},
+        "scene": {"generator": "arch", "options": scene_options},
         "measured": measured,
         "parameters": [{"name": "kn", "lower": 1e8, "upper": 1e10, "scale": "log10"},
                        {"name": "ks", "lower": 1e8, "upper": 1e10, "scale": "log10"},
@@ -92,7 +96,7 @@ def run_one(binary, args, case, seed):
         flags, _ = hidden_effect(case, args.magnitude)
         params = ["--param=%s=%r" % (k, v) for k, v in BASE_TRUTH.items()]
         subprocess.run([sys.executable, os.path.join(HERE, "synthetic_measurement.py"), binary, measured,
-                        "--seed", str(seed), "--displacement-noise", "0", *params, "--", "arch",
+                        "--seed", str(seed), "--displacement-noise", "0", "--every", str(args.every), *params, "--", "arch",
                         "--contacts-per-joint", str(args.contacts_per_joint), "--velocity", str(args.velocity),
                         "--max-displacement", str(args.max_displacement), *flags],
                        check=True, stdout=subprocess.DEVNULL)
@@ -163,6 +167,10 @@ def main():
     p.add_argument("--surrogate-kind", default="", help="the searches' surrogate (gp | mlp; default: demcal's)")
     p.add_argument("--magnitude", type=float, default=1.0,
                    help="strength of the hidden effects, x the study's default (detection limits; > 0)")
+    p.add_argument("--every", type=int, default=5,
+                   help="one simulated row in N kept as a measured row (1: the simulation's own sampling)")
+    p.add_argument("--match-sampling", action="store_true",
+                   help="the campaign's simulation recorded at the measurement's rate (record_interval)")
     p.add_argument("--jobs", type=int, default=1)
     args = p.parse_args()
     if not args.magnitude > 0:

@@ -116,6 +116,8 @@ void ArchOptions::Validate() const {
   check(velocity > 0 && std::isfinite(velocity), "--velocity", "must be positive", velocity);
   check(max_displacement > 0 && std::isfinite(max_displacement), "--max-displacement", "must be positive", max_displacement);
   check(max_time >= 0 && std::isfinite(max_time), "--max-time", "must not be negative", max_time);
+  check(record_interval >= 0 && record_interval <= max_displacement, "--record-interval",
+        "must be in [0, --max-displacement]", record_interval);
   if (load != "point" && load != "none") throw SceneError("--load", "must be point or none, got '" + load + "'");
 }
 
@@ -181,7 +183,7 @@ Scene make_arch(const ArchOptions& o) {
     s.loading.max_displacement = o.max_displacement;
     s.loading.stiffness = o.kn * o.interface_length * o.width;
     s.loading.compression_only = true;
-    s.loading.record_interval = o.max_displacement / 1200;
+    s.loading.record_interval = o.record_interval > 0 ? o.record_interval : o.max_displacement / 1200;
   }
   s.gauges.push_back({"load_vertical", loaded.name, load_point, Vec2(0, -1)});
   s.gauges.push_back({"abutment_horizontal", s.blocks[1].name, centroid_of(s.blocks[1]), Vec2(1, 0)});
@@ -250,6 +252,8 @@ void WallOptions::Validate() const {
   check(max_time >= 0 && std::isfinite(max_time), "--max-time", "must not be negative", max_time);
   check(actuator_stiffness > 0 && std::isfinite(actuator_stiffness), "--actuator-stiffness", "must be positive",
         actuator_stiffness);
+  check(record_interval >= 0 && record_interval <= max_displacement, "--record-interval",
+        "must be in [0, --max-displacement]", record_interval);
 }
 
 Scene make_wall(const WallOptions& o) {
@@ -301,7 +305,7 @@ Scene make_wall(const WallOptions& o) {
   s.loading.max_displacement = o.max_displacement;
   s.loading.stiffness = o.actuator_stiffness;
   s.loading.compression_only = false;
-  s.loading.record_interval = o.max_displacement / 1000;
+  s.loading.record_interval = o.record_interval > 0 ? o.record_interval : o.max_displacement / 1000;
   s.gauges.push_back({"top_horizontal", "beam", load_point, Vec2(1, 0)});
   apply_effects(s, o.effects);
   return s;

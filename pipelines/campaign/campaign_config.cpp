@@ -656,7 +656,7 @@ dem::Scene build_scene(const SceneSpec& spec, const std::string& where) {
   if (spec.generator == "arch") {
     reject_unknown_keys(o, {"span", "rise", "thickness", "width", "voussoirs", "density", "kn", "ks", "friction_deg",
                             "contacts_per_joint", "load_voussoir", "interface_height", "interface_length",
-                            "velocity", "max_displacement", "load", "max_time", "abutment_depth"},
+                            "velocity", "max_displacement", "record_interval", "load", "max_time", "abutment_depth"},
                         at);
     dem::ArchOptions a;
     option(o, "span", a.span, at);
@@ -674,6 +674,7 @@ dem::Scene build_scene(const SceneSpec& spec, const std::string& where) {
     option(o, "interface_length", a.interface_length, at);
     option(o, "velocity", a.velocity, at);
     option(o, "max_displacement", a.max_displacement, at);
+    option(o, "record_interval", a.record_interval, at);
     option(o, "load", a.load, at);
     option(o, "max_time", a.max_time, at);
     option(o, "abutment_depth", a.abutment_depth, at);
@@ -683,7 +684,7 @@ dem::Scene build_scene(const SceneSpec& spec, const std::string& where) {
   if (spec.generator == "wall") {
     reject_unknown_keys(o, {"height", "length", "thickness", "unit_height", "unit_length", "density",
                             "precompression_mpa", "kn", "ks", "friction_deg", "contacts_per_joint", "velocity",
-                            "max_displacement", "beam_rotation", "beam_height", "load_height", "max_time"},
+                            "max_displacement", "record_interval", "beam_rotation", "beam_height", "load_height", "max_time"},
                         at);
     dem::WallOptions w;
     option(o, "height", w.height, at);
@@ -699,6 +700,7 @@ dem::Scene build_scene(const SceneSpec& spec, const std::string& where) {
     option(o, "contacts_per_joint", w.contacts_per_joint, at);
     option(o, "velocity", w.velocity, at);
     option(o, "max_displacement", w.max_displacement, at);
+    option(o, "record_interval", w.record_interval, at);
     option(o, "beam_rotation", w.beam_rotation, at);
     option(o, "beam_height", w.beam_height, at);
     option(o, "load_height", w.load_height, at);

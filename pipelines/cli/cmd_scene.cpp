@@ -64,6 +64,8 @@ void setup_scene(CLI::App& app) {
   a->add_option("--load-voussoir", arch.load_voussoir, "Loaded voussoir, 1-based from the left")->capture_default_str();
   a->add_option("--velocity", arch.velocity, "Loading velocity (m/s)")->capture_default_str();
   a->add_option("--max-displacement", arch.max_displacement, "Actuator travel (m)")->capture_default_str();
+  a->add_option("--record-interval", arch.record_interval,
+                "Actuator travel between recorded rows (m); 0 = max-displacement / 1200")->capture_default_str();
   a->add_option("--load", arch.load, "point | none (self-weight only)")->capture_default_str();
   a->add_option("--max-time", arch.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
   add_effect_flags(a, arch.effects, false);
@@ -108,6 +110,8 @@ void setup_scene(CLI::App& app) {
   w->add_option("--contacts-per-joint", wall.contacts_per_joint, "Contact points along a joint")->capture_default_str();
   w->add_option("--velocity", wall.velocity, "Horizontal loading velocity (m/s)")->capture_default_str();
   w->add_option("--max-displacement", wall.max_displacement, "Horizontal travel of the top (m)")->capture_default_str();
+  w->add_option("--record-interval", wall.record_interval,
+                "Travel between recorded rows (m); 0 = max-displacement / 1000")->capture_default_str();
   w->add_flag("--beam-rotation,!--no-beam-rotation", wall.beam_rotation, "Let the top beam rotate")->capture_default_str();
   w->add_option("--load-height", wall.load_height, "Height of the actuator above the wall top (m)")->capture_default_str();
   w->add_option("--actuator-stiffness", wall.actuator_stiffness, "Actuator spring stiffness (N/m)")->capture_default_str();

@@ -712,6 +712,9 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   if (envelope.x.size() < 2) throw smoothing::CurveError("a simulated curve has fewer than two loading points");
   for (std::size_t i = 0; i < r.displacement.size(); ++i) r.simulated[i] = smoothing::interpolate(envelope, r.displacement[i]);
   complete_residual(r);
+  r.simulated_in_gap = static_cast<int>(std::count_if(envelope.x.begin(), envelope.x.end(),
+                                                      [&](double x) { return x > r.gap_lower && x < r.gap_upper; }));
+  r.simulated_rows = detail::finite_rows(simulated);
   return r;
 }
 
@@ -726,6 +729,39 @@ std::string narrow_window_note(const Diagnosis& d) {
   return " The base fit is compared with part of the measured range only: " + narrow +
          " (its gauge stops short in the simulation, and a gauge that hardly moves matches over what it reaches). "
          "Set \"objective\": {\"window\": \"measured\"} to compare every channel over its measured range.";
+}
+
+std::string sparse_measurement_note(const Diagnosis& d) {
+  std::string sparse;
+  for (std::size_t i = 0; i < d.base_residuals.size(); ++i) {
+    const ChannelResidual& r = d.base_residuals[i];
+    if (!(r.gap_share() > kSparseGap)) continue;
+    std::string fits;  // the fits recorded more densely, whose simulated curve has shape inside the gap
+    int most = 0;
+    std::size_t rows = 0;
+    const auto add = [&](const std::string& name, const std::vector<ChannelResidual>& residuals) {
+      if (i >= residuals.size() || residuals[i].simulated_in_gap < kShapeInGap ||
+          !(static_cast<double>(residuals[i].simulated_rows) > kDenserRecord * static_cast<double>(r.measured_rows)))
+        return;
+      fits += (fits.empty() ? "" : ", ") + name;
+      most = std::max(most, residuals[i].simulated_in_gap);
+      rows = std::max(rows, residuals[i].simulated_rows);
+    };
+    add("the base fit", d.base_residuals);
+    for (const auto& c : d.candidates) add("the " + c.effect + " fit", c.residuals);
+    if (fits.empty()) continue;
+    sparse += (sparse.empty() ? "" : "; ") + r.case_name + "/" + r.channel + " between " +
+              format_number(r.gap_lower * 1e3, 3) + " and " + format_number(r.gap_upper * 1e3, 3) + " mm (" +
+              format_number(100 * r.gap_share(), 2) + " % of its compared range), where " + fits + " simulated up to " +
+              std::to_string(most) + " points (" + std::to_string(rows) + " rows recorded against the measurement's " +
+              std::to_string(r.measured_rows) + ")";
+  }
+  if (sparse.empty()) return "";
+  return " The measurement has no point on " + sparse +
+         ": there the simulated curve is compared with a straight line between two measured points, and a fast "
+         "event (a slip, a snap) leaves an error that no parameter removes. Record the simulation at the "
+         "measurement's rate (the scene's loading.record_interval, or the generator option record_interval) so "
+         "that both curves are read at the same instants.";
 }
 
 std::string unfitted_data_note(const Diagnosis& d) {
@@ -953,11 +989,23 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.fitness = r.best.fitness;
         // on every case, the held-out ones included: the fit is judged on the data it did not use too
         best_sets[c.effect] = complete_parameters(ext, r.best.params);
-        const Evaluation e = runner.evaluate(m.config, best_sets[c.effect], &base.residuals);
-        if (!e.ok) {
-          c.reason = "its best set cannot be re-simulated: " + e.message;
+        std::vector<Evaluation> runs = {runner.evaluate(m.config, best_sets[c.effect], &base.residuals)};
+        if (!runs.front().ok) {
+          c.reason = "its best set cannot be re-simulated: " + runs.front().message;
           continue;
         }
+        // The best of many runs of a model that slips or snaps may be a lucky one: the best set
+        // re-run with its parameters moved by k x 1e-7 of themselves, and the candidate judged on
+        // the run of median error (of an even count, the worse middle one).
+        for (int k = 1; k <= options.scatter_runs; ++k) {
+          auto moved = best_sets[c.effect];
+          for (const auto& p : ext.space.free_parameters()) moved[p.name] *= 1 + 1e-7 * k;
+          Evaluation again = runner.evaluate(m.config, moved, &base.residuals);
+          if (again.ok) runs.push_back(std::move(again));
+        }
+        for (const auto& run : runs) c.rerun_errors.push_back(run.error);
+        std::stable_sort(runs.begin(), runs.end(), [](const auto& a, const auto& b) { return a.error < b.error; });
+        const Evaluation& e = runs[runs.size() / 2];
         c.residuals = e.residuals;
         c.error = e.error;
         for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
@@ -994,7 +1042,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       }
     }
   }
-  d.verdict += narrow_window_note(d);
+  d.verdict += narrow_window_note(d) + sparse_measurement_note(d);
   d.simulations = runner.simulations();
   d.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   {
@@ -1027,6 +1075,7 @@ json Diagnosis::to_json() const {
                      {"verdict", c.verdict},
                      {"reason", c.reason},
                      {"simulations", c.simulations},
+                     {"rerun_errors", c.rerun_errors},
                      {"residual", rj},
                      {"held_out_rms", params_json(c.held_out_rms)}});
     cands.back()["error"] = finite_or_null(c.error);

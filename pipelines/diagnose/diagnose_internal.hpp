@@ -14,6 +14,9 @@ std::string format_number(double v, int digits = 3);
 // "closure_max"; a bare name is its own field.
 std::string parameter_field(const std::string& name);
 
+// Rows of a recorded series with a finite displacement and force.
+std::size_t finite_rows(const smoothing::XYSeries& series);
+
 // report.md and its figures (diagnose_report.cpp).
 void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 

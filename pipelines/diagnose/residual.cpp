@@ -71,6 +71,8 @@ json ChannelResidual::to_json() const {
           {"rms_over_noise", finite_or_null(rms / noise)},
           {"peak_displacement", peak_displacement},
           {"coverage", coverage},
+          {"measured_gap", {{"lower", gap_lower}, {"upper", gap_upper}, {"simulated_points", simulated_in_gap}}},
+          {"rows", {{"measured", measured_rows}, {"simulated", simulated_rows}}},
           {"regions", regions_json},
           {"autocorrelation", autocorrelation},
           {"effective_points", effective_points}};
@@ -160,7 +162,36 @@ ChannelResidual analyse_channel(const XYSeries& measured, const XYSeries& simula
   }
   c.noise = estimate_noise(measured);
   complete_residual(c);
+
+  // The widest stretch between consecutive measured envelope points (the window's ends included).
+  double previous = lower;
+  c.gap_lower = c.gap_upper = lower;
+  for (std::size_t i = 0; i <= m.x.size(); ++i) {
+    const double x = i < m.x.size() ? std::min(m.x[i], upper) : upper;
+    if (x <= previous) continue;
+    if (x - previous > c.gap_upper - c.gap_lower) {
+      c.gap_lower = previous;
+      c.gap_upper = x;
+    }
+    previous = x;
+  }
+  c.simulated_in_gap = static_cast<int>(std::count_if(
+      s.x.begin(), s.x.end(), [&](double x) { return x > c.gap_lower && x < c.gap_upper; }));
+  c.measured_rows = detail::finite_rows(measured);
+  c.simulated_rows = detail::finite_rows(simulated);
   return c;
+}
+
+std::size_t detail::finite_rows(const XYSeries& series) {
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < series.x.size() && i < series.y.size(); ++i)
+    n += std::isfinite(series.x[i]) && std::isfinite(series.y[i]) ? 1 : 0;
+  return n;
+}
+
+double ChannelResidual::gap_share() const {
+  if (displacement.size() < 2 || !(displacement.back() > displacement.front())) return 0;
+  return (gap_upper - gap_lower) / (displacement.back() - displacement.front());
 }
 
 double information_criterion_change(const std::vector<ChannelResidual>& base, const std::vector<ChannelResidual>& extended,

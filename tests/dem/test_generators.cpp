@@ -134,6 +134,8 @@ TEST(ArchGenerator, RefusesWhatItCannotBuildNamingTheFlag) {
       {"--contacts-per-joint 500", "--contacts-per-joint"},  // the engine takes 2..200
       {"--friction-deg 90", "--friction-deg"},
       {"--load line", "--load"},
+      {"--record-interval 0.02", "--record-interval"},     // beyond the travel (default 12 mm)
+      {"--record-interval -1e-5", "--record-interval"},
   };
   for (const auto& c : cases) {
     EXPECT_NE(run_cli("scene arch " + c.args + " -o /dev/null", out), 0) << c.args;
@@ -145,6 +147,26 @@ TEST(ArchGenerator, RefusesWhatItCannotBuildNamingTheFlag) {
   EXPECT_NE(out.find("--unit-height"), std::string::npos) << out;
   EXPECT_NE(run_cli("scene wall --beam-height inf -o /dev/null", out), 0);
   EXPECT_NE(out.find("--beam-height"), std::string::npos) << out;
+}
+
+TEST(ArchGenerator, RecordIntervalSetsTheRowsOfTheRecording) {
+  // The default: 1200 rows over the travel; a given interval (a measurement's sampling) is kept.
+  ArchOptions o;
+  o.max_displacement = 2e-4;
+  o.velocity = 0.01;
+  o.contacts_per_joint = 3;
+  EXPECT_DOUBLE_EQ(make_arch(o).loading.record_interval, 2e-4 / 1200);
+  o.record_interval = 5e-5;
+  const Scene scene = make_arch(o);
+  EXPECT_DOUBLE_EQ(scene.loading.record_interval, 5e-5);
+  EXPECT_DOUBLE_EQ(scene_from_json(scene_to_json(scene), "arch").loading.record_interval, 5e-5);
+  const Recording r = simulate(scene);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  EXPECT_EQ(r.force.size(), 5u);  // travel 0, 50, 100, 150 and 200 um
+  WallOptions w;
+  EXPECT_DOUBLE_EQ(make_wall(w).loading.record_interval, w.max_displacement / 1000);
+  w.record_interval = 1e-3;
+  EXPECT_DOUBLE_EQ(make_wall(w).loading.record_interval, 1e-3);
 }
 
 TEST(SemicircleGenerator, ThicknessAndVoussoirRangeValidatesAndRuns) {

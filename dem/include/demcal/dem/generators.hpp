@@ -49,6 +49,9 @@ struct ArchOptions {
   double interface_length = 0.11;    // its horizontal length (m), sets the actuator's contact area
   double velocity = 0.01;            // m/s (10 mm/s)
   double max_displacement = 0.012;   // m
+  // m of actuator travel between recorded rows; 0 = max_displacement / 1200. Set it to the
+  // measurement's sampling so that both curves are read at the same instants (docs/diagnose.md).
+  double record_interval = 0;
   std::string load = "point";        // "point" | "none"
   double max_time = 0;               // s; 0 = travel time x 1.5 + 5 s
   double abutment_depth = 0.3;       // extent of each abutment block below and beside the springing (m)
@@ -93,6 +96,7 @@ struct WallOptions {
   int contacts_per_joint = 15;
   double velocity = 0.002;         // m/s
   double max_displacement = 0.02;  // m
+  double record_interval = 0;      // m of travel between recorded rows; 0 = max_displacement / 1000
   bool beam_rotation = false;      // true: the top beam may rotate
   double beam_height = 0.1;        // m
   double load_height = 0.1;        // m above the top of the wall where the actuator pushes

@@ -75,6 +75,12 @@ struct ChannelResidual {
   double autocorrelation = 0;          // lag-1 autocorrelation of the residual on the grid
   double effective_points = 0;         // n (1 - rho) / (1 + rho), clamped to [1, n]
   double coverage = 1;                 // the window's share of the measured envelope's displacement range
+  // The widest stretch of the window with no measured envelope point inside (m), and the simulated
+  // envelope points inside it: there the measurement is a straight line between its two ends.
+  double gap_lower = 0, gap_upper = 0;
+  int simulated_in_gap = 0;
+  std::size_t measured_rows = 0, simulated_rows = 0;  // of the two curves as recorded (finite rows)
+  double gap_share() const;            // the gap's share of the window, in [0, 1]
 
   std::vector<double> residual() const;  // measured - simulated
   nlohmann::json to_json() const;        // the numbers, not the arrays
@@ -89,8 +95,9 @@ ChannelResidual analyse_channel(const smoothing::XYSeries& measured, const smoot
 // points) from its displacement, measured and simulated arrays; keeps its noise.
 void complete_residual(ChannelResidual& residual);
 
-// The grid, measured values and noise of `base` with another simulated curve interpolated on it
-// (clamped to its end values outside its range), so that two fits compare point by point.
+// The grid, measured values, noise and measured gap of `base` with another simulated curve
+// interpolated on it (clamped to its end values outside its range), so that two fits compare point
+// by point; its simulated points in the gap are its own.
 ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeries& simulated);
 
 // Standard deviation of the noise on a measured curve, from the data alone: the loading envelope's
@@ -165,7 +172,8 @@ struct DiagnoseOptions {
   // Re-runs of the base best with every free parameter moved by k x 1e-7 of itself (k = 1..n): the
   // simulation's own scatter, since stick-slip events of a block model fall at other moments for
   // parameter sets that differ by far less than anything physical. It counts with the measurement
-  // noise in the "nothing to explain" test. 0 = not measured, >= 0.
+  // noise in the "nothing to explain" test. Each tried candidate's best set is re-run alike, and
+  // judged on the run of median error, so that one lucky run does not decide. 0 = neither, >= 0.
   int scatter_runs = 2;
   // Base parameters in each candidate calibration: log-scaled ones within best x/÷ narrow_log_factor
   // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range, then clipped to
@@ -218,6 +226,9 @@ struct EffectCandidate {
   double fitness = kNaN;                   // the campaign objective of that set
   std::map<std::string, double> rms;       // "<case>/<channel>" -> RMS force error, N
   double error = kNaN;                     // RMS force error over all channels, N
+  // The overall error of the best set and of its re-runs with the parameters moved by k x 1e-7
+  // (DiagnoseOptions::scatter_runs); rms, error, score and residuals are those of the median run.
+  std::vector<double> rerun_errors;
   double score = kNaN;                     // information criterion change against the base (< 0 better)
   std::string verdict = "not tried";       // "accepted" | "rejected" | "tied" | "not tried"
   std::string reason;                      // one line: why this verdict
@@ -286,6 +297,18 @@ std::string unfitted_data_note(const Diagnosis& diagnosis);
 // "" when there are none.
 constexpr double kNarrowWindow = 0.5;
 std::string narrow_window_note(const Diagnosis& diagnosis);
+
+// A sentence for the verdict on the fitted channels whose measurement leaves a gap wider than
+// `kSparseGap` of the compared range in which the base fit or a candidate's fit, recorded more
+// densely than the measurement (more than `kDenserRecord` x its rows), has at least `kShapeInGap`
+// simulated envelope points: a fast event (a slip, a snap) recorded densely by the simulation and at
+// two points by the measurement, so that the simulated curve is compared with a straight line there
+// and keeps an error no parameter removes (docs/diagnose.md, "Sampled alike"). It names those fits
+// and recommends recording the simulation at the measurement's rate. "" when there are none.
+constexpr double kSparseGap = 0.25;
+constexpr int kShapeInGap = 3;
+constexpr double kDenserRecord = 1.5;
+std::string sparse_measurement_note(const Diagnosis& diagnosis);
 
 // Step 5, the verdict from the tried candidates (their score, error and held-out errors) and the
 // base residuals (their noise): each candidate's verdict and reason, diagnosis.chosen, error_after
