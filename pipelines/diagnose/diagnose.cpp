@@ -616,9 +616,20 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   }
   std::sort(accepted.begin(), accepted.end(), [](auto* a, auto* b) { return a->score < b->score; });
   std::vector<EffectCandidate*> tied;
+  std::map<const EffectCandidate*, std::string> tie_reasons;
   for (auto* c : accepted) {
-    if (c->score - accepted.front()->score < options.tie_margin) {
+    const auto* front = accepted.front();
+    if (c->score - front->score < options.tie_margin) {
       tied.push_back(c);
+      tie_reasons[c] = "explains the data as well as the other tied effects (criteria within " +
+                       format_number(options.tie_margin) + ")";
+    } else if (c->error < front->error) {
+      // Both pass, the criterion prefers the front and the curves prefer this one (the criterion's
+      // effective points come from each fit's own residual): the two measures disagree.
+      tied.push_back(c);
+      tie_reasons[c] = "passes the criterion less clearly than " + front->effect + " (" + format_number(c->score) +
+                       " against " + format_number(front->score) + ") but fits the curves better (error " +
+                       format_number(c->error) + " against " + format_number(front->error) + " N)";
     } else {
       c->verdict = "rejected";
       c->reason = "explains the data clearly less well than " + accepted.front()->effect + " (criterion " +
@@ -672,8 +683,7 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
     std::string names;
     for (auto* c : tied) {
       c->verdict = "tied";
-      c->reason = "explains the data as well as the other tied effects (criteria within " +
-                  format_number(options.tie_margin) + ")";
+      c->reason = tie_reasons[c];
       names += (names.empty() ? "" : " or ") + c->effect;
     }
     d.chosen.clear();

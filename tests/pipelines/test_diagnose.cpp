@@ -315,6 +315,20 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
   EXPECT_EQ(d.chosen, std::vector<std::string>{"cohesion"}) << d.verdict;
   EXPECT_EQ(d.candidates[0].verdict, "rejected");
   EXPECT_EQ(d.error_after, 565);
+  // Both pass, the criterion prefers cohesion and the curves friction softening (the study's seed 4
+  // with 160 simulations per candidate): tied, neither chosen.
+  d.candidates = {candidate("friction-softening", 244, -30.3), candidate("cohesion", 307, -68)};
+  d.chosen.clear();
+  select_effect(d, options);
+  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
+  for (const auto& c : d.candidates) EXPECT_EQ(c.verdict, "tied") << c.effect << ": " << c.reason;
+  EXPECT_NE(d.candidates[0].reason.find("fits the curves better (error 244 against 307 N)"), std::string::npos)
+      << d.candidates[0].reason;
+  // Both pass and agree: the better criterion with the lower error is chosen.
+  d.candidates = {candidate("friction-softening", 320, -30.3), candidate("cohesion", 307, -68)};
+  select_effect(d, options);
+  EXPECT_EQ(d.chosen, std::vector<std::string>{"cohesion"}) << d.verdict;
+  EXPECT_EQ(d.candidates[0].verdict, "rejected");
   // None passes, with the base 15 x its noise: the model lacks something; the closest fit is named.
   d.candidates = {candidate("friction-softening", 450, -4.8), candidate("cohesion", 645, -0.4)};
   select_effect(d, options);

@@ -313,7 +313,8 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 // Step 5, the verdict from the tried candidates (their score, error and held-out errors) and the
 // base residuals (their noise): each candidate's verdict and reason, diagnosis.chosen, error_after
 // and verdict. Accepted: criterion change below -evidence_threshold, error below the base's, and
-// the held-out data not spoilt; two accepted within tie_margin are tied; one accepted while a
+// the held-out data not spoilt; two accepted within tie_margin are tied, and so are two accepted
+// of which the criterion prefers one and the error the other; one accepted while a
 // candidate short of the criterion fits the curves better by more than the noise: both tied (the
 // criterion would name the worse fit). None: "No effect needed", or "No effect found" when the
 // base error exceeds kUnexplainedRatio x the noise and scatter combined and a candidate was fitted
