@@ -358,6 +358,14 @@ std::vector<std::vector<double>> probe_points(std::size_t parameters) {
   return points;
 }
 
+// `best` with every free parameter of `config` moved by k x 1e-7 of itself: a set that differs from
+// it by far less than anything physical (the scatter runs).
+std::map<std::string, double> nudged(const std::map<std::string, double>& best, const CampaignConfig& config, int k) {
+  auto moved = best;
+  for (const auto& p : config.space.free_parameters()) moved[p.name] *= 1 + 1e-7 * k;
+  return moved;
+}
+
 // The simulation's own scatter per channel (into `per_channel`, "<case>/<channel>" -> N) and over
 // all channels (returned; NaN when not measured): the base best re-run `runs` times with every free
 // parameter moved by k x 1e-7 of itself; half the mean square difference of each pair of curves on
@@ -367,9 +375,7 @@ double simulation_scatter(const CampaignConfig& config, const std::map<std::stri
                           std::map<std::string, double>& per_channel) {
   std::vector<std::vector<ChannelResidual>> curves = {base};
   for (int k = 1; k <= runs; ++k) {
-    auto moved = best;
-    for (const auto& p : config.space.free_parameters()) moved[p.name] *= 1 + 1e-7 * k;
-    const Evaluation e = runner.evaluate(config, moved, &base);
+    const Evaluation e = runner.evaluate(config, nudged(best, config, k), &base);
     if (e.ok) curves.push_back(e.residuals);
   }
   if (curves.size() < 2) return Diagnosis::kNaN;
@@ -722,9 +728,7 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   if (envelope.x.size() < 2) throw smoothing::CurveError("a simulated curve has fewer than two loading points");
   for (std::size_t i = 0; i < r.displacement.size(); ++i) r.simulated[i] = smoothing::interpolate(envelope, r.displacement[i]);
   complete_residual(r);
-  r.simulated_in_gap = static_cast<int>(std::count_if(envelope.x.begin(), envelope.x.end(),
-                                                      [&](double x) { return x > r.gap_lower && x < r.gap_upper; }));
-  r.simulated_rows = detail::finite_rows(simulated);
+  detail::note_simulated_sampling(r, simulated, envelope);
   return r;
 }
 
@@ -1008,9 +1012,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         // re-run with its parameters moved by k x 1e-7 of themselves, and the candidate judged on
         // the run of median error (of an even count, the worse middle one).
         for (int k = 1; k <= options.scatter_runs; ++k) {
-          auto moved = best_sets[c.effect];
-          for (const auto& p : ext.space.free_parameters()) moved[p.name] *= 1 + 1e-7 * k;
-          Evaluation again = runner.evaluate(m.config, moved, &base.residuals);
+          Evaluation again = runner.evaluate(m.config, nudged(best_sets[c.effect], ext, k), &base.residuals);
           if (again.ok) runs.push_back(std::move(again));
         }
         for (const auto& run : runs) c.rerun_errors.push_back(run.error);

@@ -14,8 +14,10 @@ std::string format_number(double v, int digits = 3);
 // "closure_max"; a bare name is its own field.
 std::string parameter_field(const std::string& name);
 
-// Rows of a recorded series with a finite displacement and force.
-std::size_t finite_rows(const smoothing::XYSeries& series);
+// A residual's simulated_rows and simulated_in_gap from its simulated series and that series's
+// loading envelope (its measured gap already set).
+void note_simulated_sampling(ChannelResidual& residual, const smoothing::XYSeries& simulated,
+                             const smoothing::XYSeries& simulated_envelope);
 
 // report.md and its figures (diagnose_report.cpp).
 void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);

@@ -17,6 +17,14 @@ using smoothing::XYSeries;
 
 namespace {
 
+// Rows of a recorded series with a finite displacement and force.
+std::size_t finite_rows(const XYSeries& series) {
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < series.x.size() && i < series.y.size(); ++i)
+    n += std::isfinite(series.x[i]) && std::isfinite(series.y[i]) ? 1 : 0;
+  return n;
+}
+
 double mean_of(const std::vector<double>& v) {
   return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
 }
@@ -175,18 +183,15 @@ ChannelResidual analyse_channel(const XYSeries& measured, const XYSeries& simula
     }
     previous = x;
   }
-  c.simulated_in_gap = static_cast<int>(std::count_if(
-      s.x.begin(), s.x.end(), [&](double x) { return x > c.gap_lower && x < c.gap_upper; }));
-  c.measured_rows = detail::finite_rows(measured);
-  c.simulated_rows = detail::finite_rows(simulated);
+  c.measured_rows = finite_rows(measured);
+  detail::note_simulated_sampling(c, simulated, s);
   return c;
 }
 
-std::size_t detail::finite_rows(const XYSeries& series) {
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < series.x.size() && i < series.y.size(); ++i)
-    n += std::isfinite(series.x[i]) && std::isfinite(series.y[i]) ? 1 : 0;
-  return n;
+void detail::note_simulated_sampling(ChannelResidual& r, const XYSeries& simulated, const XYSeries& envelope) {
+  r.simulated_rows = finite_rows(simulated);
+  r.simulated_in_gap = static_cast<int>(
+      std::count_if(envelope.x.begin(), envelope.x.end(), [&](double x) { return x > r.gap_lower && x < r.gap_upper; }));
 }
 
 double ChannelResidual::gap_share() const {
