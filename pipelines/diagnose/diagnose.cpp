@@ -574,7 +574,8 @@ std::vector<double> bound_trial_values(const dem::EffectParameter& p, double bes
 // The bounds of every parameter of candidate c's effect (its fit re-simulated on the fitted cases
 // with one parameter moved at a time), within the diagnosis's simulation budget.
 void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const std::map<std::string, double>& best,
-                             const std::vector<ChannelResidual>& grid, CaseRunner& runner, const DiagnoseOptions& options) {
+                             const std::vector<ChannelResidual>& grid, const std::vector<double>& effective_points,
+                             CaseRunner& runner, const DiagnoseOptions& options) {
   const CampaignConfig fitted = fitted_cases(m.config, options);
   const long runs_per_trial = static_cast<long>(fitted.cases.size());
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
@@ -589,10 +590,33 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
       std::map<std::string, double> params = best;
       params[name] = v;
       const Evaluation e = runner.evaluate(fitted, params, &grid);
-      trials.emplace_back(v, e.ok ? information_criterion_change(c.residuals, e.residuals, 0) : Diagnosis::kNaN);
+      trials.emplace_back(v, e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : Diagnosis::kNaN);
     }
     c.bounds.push_back(bound_from_trials(name, best.at(name), trials, options.evidence_threshold));
   }
+}
+
+// Every calibrated candidate's criterion change against the base, all counted with the effective
+// points of common_effective_points over the base and those candidates (kept in the diagnosis);
+// returns them in the order of the base residuals.
+std::vector<double> score_candidates(Diagnosis& d) {
+  std::vector<const std::vector<ChannelResidual>*> fits = {&d.base_residuals};
+  std::vector<std::string> names = {"base"};
+  for (const auto& c : d.candidates)
+    if (c.tried && c.residuals.size() == d.base_residuals.size()) {
+      fits.push_back(&c.residuals);
+      names.push_back(c.effect);
+    }
+  std::vector<int> from;
+  const std::vector<double> points = common_effective_points(fits, &from);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    d.effective_points[key_of(d.base_residuals[i])] = points[i];
+    d.effective_points_from[key_of(d.base_residuals[i])] = names[static_cast<std::size_t>(from[i])];
+  }
+  for (auto& c : d.candidates)
+    if (c.tried && c.residuals.size() == d.base_residuals.size())
+      c.score = information_criterion_change(d.base_residuals, c.residuals, c.effect_parameters, points);
+  return points;
 }
 
 }  // namespace
@@ -630,8 +654,9 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
       tie_reasons[c] = "explains the data as well as the other tied effects (criteria within " +
                        format_number(options.tie_margin) + ")";
     } else if (c->error < front->error) {
-      // Both pass, the criterion prefers the front and the curves prefer this one (the criterion's
-      // effective points come from each fit's own residual): the two measures disagree.
+      // Both pass, the criterion prefers the front and the curves prefer this one (a channel the
+      // front fits better outweighs the others, or the front adds fewer parameters): the two
+      // measures disagree.
       tied.push_back(c);
       tie_reasons[c] = "passes the criterion less clearly than " + front->effect + " (" + format_number(c->score) +
                        " against " + format_number(front->score) + ") but fits the curves better (error " +
@@ -644,8 +669,9 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   }
   const double noise = overall_noise(d.base_residuals);
   // One effect passes, but another fits the curves better by more than the noise without passing
-  // (its remaining residual is smooth, so it earns few independent points): both explain part of
-  // the residual, and the criterion alone would name the worse fit. The data cannot tell them apart.
+  // (it adds more parameters, or its gain lies on a channel with few independent points): both
+  // explain part of the residual, and the criterion alone would name the worse fit. The data cannot
+  // tell them apart.
   std::vector<EffectCandidate*> better_fits;
   if (tied.size() == 1)
     for (auto* c : short_of_criterion)
@@ -657,7 +683,7 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
       c->verdict = "tied";
       c->reason = "fits the curves better than " + passing->effect + " (error " + format_number(c->error) +
                   " against " + format_number(passing->error) + " N) but does not pass the criterion (" +
-                  format_number(c->score) + "): its remaining residual is smooth";
+                  format_number(c->score) + ")";
       names += (names.empty() ? "" : " and ") + c->effect + " (" + format_number(c->error) + " N, criterion " +
                format_number(c->score) + ")";
     }
@@ -1023,7 +1049,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
         for (const auto& ch : e.held_out) c.held_out_rms[key_of(ch)] = ch.rms;
         c.held_out_error = e.held_out_error;
-        c.score = information_criterion_change(base.residuals, e.residuals, static_cast<int>(m.parameter_names.size()));
+        c.effect_parameters = static_cast<int>(m.parameter_names.size());
       } catch (const std::exception& ex) {
         c.reason = std::string("its calibration failed: ") + ex.what();
       }
@@ -1031,6 +1057,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   }
 
   // 5. selection
+  const std::vector<double> effective_points = score_candidates(d);
   if (at_noise) {
     d.error_after = d.error_before;
     d.verdict = "No effect needed: the base fit is already within the measurement noise and the simulation's own "
@@ -1043,7 +1070,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       for (auto& c : d.candidates) {
         if (c.verdict != "accepted" && c.verdict != "tied") continue;
         progress(options, "checking how tightly the data pin the parameters of " + c.effect);
-        bound_effect_parameters(c, models.at(c.effect), best_sets.at(c.effect), base.residuals, runner, options);
+        bound_effect_parameters(c, models.at(c.effect), best_sets.at(c.effect), base.residuals, effective_points, runner,
+                                options);
         if (c.verdict == "accepted")
           for (const auto& b : c.bounds) bounds.push_back(b.describe());
       }
@@ -1101,10 +1129,14 @@ json Diagnosis::to_json() const {
       cands.back()["bounds"] = bounds;
     }
   }
+  json points = json::object();
+  for (const auto& [key, n] : effective_points)
+    points[key] = {{"points", n}, {"from", effective_points_from.count(key) ? effective_points_from.at(key) : ""}};
   return {{"status", status},
           {"message", message},
           {"base", base},
           {"noise", params_json(noise)},
+          {"effective_points", points},
           {"scatter", params_json(scatter)},
           {"candidates", cands},
           {"chosen", chosen},

@@ -113,6 +113,13 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
        << num(c.held_out_error) << " | " << num(c.score) << " | " << c.verdict << " | " << c.reason << " |\n";
   }
   md << "\n";
+  if (!d.effective_points.empty()) {
+    std::string counts;
+    for (const auto& [key, n] : d.effective_points)
+      counts += (counts.empty() ? " " : "; ") + key + " " + num(n) + " (" + d.effective_points_from.at(key) + ")";
+    md << "The criterion counts every fit with the same effective points per channel, those of the fit closest "
+          "to the measurement there:" << counts << ".\n\n";
+  }
   if (!d.held_out_rms.empty()) {
     md << "Data not fitted (channels of weight 0, held-out cases) and the base fit's RMS error there. A channel "
           "checks the fits only where the base fit reproduces it (RMS at most "

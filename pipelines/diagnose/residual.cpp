@@ -200,13 +200,15 @@ double ChannelResidual::gap_share() const {
 }
 
 double information_criterion_change(const std::vector<ChannelResidual>& base, const std::vector<ChannelResidual>& extended,
-                                    int extra_parameters) {
+                                    int extra_parameters, const std::vector<double>& effective_points) {
   if (base.size() != extended.size() || base.empty())
     throw std::invalid_argument("information criterion: base and extended fits must cover the same channels");
+  if (!effective_points.empty() && effective_points.size() != base.size())
+    throw std::invalid_argument("information criterion: one effective point count per channel");
   double change = 0, total_effective = 0;
   for (std::size_t c = 0; c < base.size(); ++c) {
     const double rss_base = base[c].rms * base[c].rms, rss_ext = extended[c].rms * extended[c].rms;
-    const double n_eff = extended[c].effective_points;
+    const double n_eff = effective_points.empty() ? extended[c].effective_points : effective_points[c];
     total_effective += n_eff;
     // Within the measurement noise a channel tells nothing: each side counts at least the noise's
     // variance (and at least 1e-12 of the other, so that a perfect fit keeps the logarithm finite).
@@ -215,6 +217,25 @@ double information_criterion_change(const std::vector<ChannelResidual>& base, co
     change += n_eff * std::log(std::max(rss_ext, floor) / std::max(rss_base, floor));
   }
   return change + extra_parameters * std::log(std::max(total_effective, 1.0));
+}
+
+std::vector<double> common_effective_points(const std::vector<const std::vector<ChannelResidual>*>& fits,
+                                            std::vector<int>* from) {
+  std::vector<double> points;
+  std::vector<int> closest;
+  for (std::size_t f = 0; f < fits.size(); ++f) {
+    const auto& fit = *fits[f];
+    if (fit.empty() || (!closest.empty() && fit.size() != closest.size())) continue;
+    if (closest.empty()) {
+      closest.assign(fit.size(), static_cast<int>(f));
+      continue;
+    }
+    for (std::size_t c = 0; c < fit.size(); ++c)
+      if (fit[c].rms < (*fits[closest[c]])[c].rms) closest[c] = static_cast<int>(f);
+  }
+  for (std::size_t c = 0; c < closest.size(); ++c) points.push_back((*fits[closest[c]])[c].effective_points);
+  if (from) *from = closest;
+  return points;
 }
 
 double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,

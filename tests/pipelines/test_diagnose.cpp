@@ -121,6 +121,36 @@ TEST(Evidence, AChannelWithinItsNoiseIsNeitherForNorAgainst) {
   EXPECT_LT(information_criterion_change({channel(200), channel(4)}, {channel(25), channel(15)}, 2), -10);
 }
 
+TEST(Evidence, EveryFitIsCountedWithTheEffectivePointsOfTheClosestFit) {
+  auto channel = [](double rms, double points) {
+    ChannelResidual c;
+    c.rms = rms;
+    c.noise = 20;
+    c.effective_points = points;
+    return c;
+  };
+  // a base fit, a candidate that leaves a rough residual (many points) and one that fits closer
+  // with a smoother residual; on the second channel the rough one is the closest
+  const std::vector<ChannelResidual> base = {channel(800, 3), channel(100, 5)};
+  const std::vector<ChannelResidual> rough = {channel(300, 40), channel(30, 60)};
+  const std::vector<ChannelResidual> closer = {channel(240, 10), channel(50, 8)};
+  const std::vector<ChannelResidual> other_channels = {channel(1, 500)};
+  std::vector<int> from;
+  const auto points = common_effective_points({&base, &rough, &other_channels, &closer}, &from);
+  ASSERT_EQ(points.size(), 2u);
+  EXPECT_EQ(points[0], 10);
+  EXPECT_EQ(points[1], 60);
+  EXPECT_EQ(from, (std::vector<int>{3, 1}));
+  // counted with its own points the rough fit would pass far more clearly on the first channel;
+  // counted alike, the closer fit is ahead there
+  EXPECT_LT(information_criterion_change({base[0]}, {rough[0]}, 0), information_criterion_change({base[0]}, {closer[0]}, 0));
+  EXPECT_GT(information_criterion_change({base[0]}, {rough[0]}, 0, {points[0]}),
+            information_criterion_change({base[0]}, {closer[0]}, 0, {points[0]}));
+  EXPECT_DOUBLE_EQ(information_criterion_change(base, closer, 2, points),
+                   10 * std::log(240.0 * 240 / (800 * 800)) + 60 * std::log(50.0 * 50 / (100 * 100)) + 2 * std::log(70.0));
+  EXPECT_THROW(information_criterion_change(base, closer, 2, {10}), std::invalid_argument);
+}
+
 TEST(Evidence, SignatureScoreNeedsTheRightShapeAndSign) {
   const int n = 300;
   std::vector<double> j1(n), s(n), other(n), residual(n), wrong(n);
@@ -542,8 +572,14 @@ TEST(DiagnoseLoop, NamesAHiddenCompliantSupportAndRecoversIt) {
     EXPECT_GT(kx->upper, 5e6) << kx->describe();
   }
   EXPECT_NE(d.verdict.find("How tightly the data pin it"), std::string::npos) << d.verdict;
+  // every candidate counted with the same effective points: per channel, those of the closest fit
+  ASSERT_EQ(d.effective_points.size(), d.base_residuals.size());
+  std::vector<double> points;
+  for (const auto& r : d.base_residuals) points.push_back(d.effective_points.at(r.case_name + "/" + r.channel));
+  for (const auto& c : d.candidates)
+    EXPECT_DOUBLE_EQ(c.score, information_criterion_change(d.base_residuals, c.residuals, c.effect_parameters, points));
   const json j = test_support::read_json(dir / "out" / "diagnosis.json");
-  for (const char* key : {"base", "noise", "candidates", "chosen", "error_before", "error_after"})
+  for (const char* key : {"base", "noise", "effective_points", "candidates", "chosen", "error_before", "error_after"})
     EXPECT_TRUE(j.contains(key)) << key;
   EXPECT_EQ(j["candidates"].size(), 2u);
   for (const auto& c : j["candidates"])

@@ -18,7 +18,8 @@
 //                    Bayesian optimisation on the surrogate (default), or a local search started
 //                    from B with the effect at its probe closest to the measurement;
 //   5. selection     the change of an information criterion with the effective number of
-//                    independent points (the residual is autocorrelated): accepted when it falls
+//                    independent points (the residual is autocorrelated; one count per channel for
+//                    every fit, common_effective_points): accepted when it falls
 //                    by more than `evidence_threshold`; "no effect needed" when none is accepted or
 //                    the base residual is already at the noise level; two accepted effects within
 //                    `tie_margin` of each other are "tied", and then none is chosen;
@@ -113,12 +114,24 @@ double lag1_autocorrelation(const std::vector<double>& values);
 
 // Change of the Bayesian information criterion from a base fit to an extended one, both measured on
 // the same channels: sum_c n_eff,c ln(RSS_ext,c / RSS_base,c) + extra_parameters ln(sum_c n_eff,c),
-// with each channel's effective points taken from the extended fit's residual and each RSS (mean
-// square) floored at the channel's noise variance: a channel fitted within its noise counts as at
-// the noise, so moving about inside it is neither evidence for nor against a model. Negative =
-// evidence for the extension; below -10 is "very strong" on the usual scale (Kass and Raftery 1995).
+// with each RSS (mean square) floored at the channel's noise variance: a channel fitted within its
+// noise counts as at the noise, so moving about inside it is neither evidence for nor against a
+// model. n_eff,c: `effective_points` (one per channel, as common_effective_points gives them), or
+// when that is empty the extended fit's own. Negative = evidence for the extension; below -10 is
+// "very strong" on the usual scale (Kass and Raftery 1995).
 double information_criterion_change(const std::vector<ChannelResidual>& base,
-                                    const std::vector<ChannelResidual>& extended, int extra_parameters);
+                                    const std::vector<ChannelResidual>& extended, int extra_parameters,
+                                    const std::vector<double>& effective_points = {});
+
+// The effective points per channel with which the criterion counts every fit of one diagnosis: on
+// each channel, those of the fit with the lowest RMS error there among `fits` (each a set of
+// residuals on the same channels; sets of another size are skipped). How many independent points
+// the data hold is a property of the data, not of a model, so the models compared are counted
+// alike: with each fit's own count, a fit that leaves a rougher residual would earn more points and
+// could pass with a worse error. The closest fit's residual is the nearest to the noise process; the
+// structure it keeps makes the count conservative. `from`, if given, gets each channel's fit index.
+std::vector<double> common_effective_points(const std::vector<const std::vector<ChannelResidual>*>& fits,
+                                            std::vector<int>* from = nullptr);
 
 // Share of the residual r that the base parameters' sensitivities J cannot remove and the effect's
 // signatures S (its curve changes at a few magnitudes) can, with non-negative weights on S (an
@@ -229,7 +242,9 @@ struct EffectCandidate {
   // The overall error of the best set and of its re-runs with the parameters moved by k x 1e-7
   // (DiagnoseOptions::scatter_runs); rms, error, score and residuals are those of the median run.
   std::vector<double> rerun_errors;
-  double score = kNaN;                     // information criterion change against the base (< 0 better)
+  int effect_parameters = 0;               // parameters the effect adds (the criterion's penalty)
+  double score = kNaN;                     // information criterion change against the base (< 0 better),
+                                           // with the diagnosis's effective_points
   std::string verdict = "not tried";       // "accepted" | "rejected" | "tied" | "not tried"
   std::string reason;                      // one line: why this verdict
   long simulations = 0;
@@ -256,6 +271,10 @@ struct Diagnosis {
   std::map<std::string, double> scatter;   // "<case>/<channel>" -> N, the simulation's own (scatter_runs)
   std::vector<ChannelResidual> base_residuals;
   std::vector<EffectCandidate> candidates; // signature order (best first)
+  // The criterion's effective points, "<case>/<channel>" -> n, and the fit they were taken from
+  // ("base" or an effect): common_effective_points over the base and every calibrated candidate.
+  std::map<std::string, double> effective_points;
+  std::map<std::string, std::string> effective_points_from;
   std::vector<std::string> chosen;         // [] = no effect needed (or a tie)
   std::string verdict;                     // the conclusion in words
   double error_before = kNaN;              // RMS force error over all channels, N
