@@ -366,36 +366,53 @@ std::map<std::string, double> nudged(const std::map<std::string, double>& best, 
   return moved;
 }
 
-// The simulation's own scatter per channel (into `per_channel`, "<case>/<channel>" -> N) and over
-// all channels (returned; NaN when not measured): the base best re-run `runs` times with every free
-// parameter moved by k x 1e-7 of itself; half the mean square difference of each pair of curves on
-// the base grid estimates the variance of one curve.
-double simulation_scatter(const CampaignConfig& config, const std::map<std::string, double>& best,
-                          const std::vector<ChannelResidual>& base, int runs, CaseRunner& runner,
-                          std::map<std::string, double>& per_channel) {
-  std::vector<std::vector<ChannelResidual>> curves = {base};
-  for (int k = 1; k <= runs; ++k) {
-    const Evaluation e = runner.evaluate(config, nudged(best, config, k), &base);
-    if (e.ok) curves.push_back(e.residuals);
+// A parameter set's run and its re-runs with every free parameter of `nudge_space` moved by k x 1e-7
+// of itself (k = 1..reruns), each on `grid` (none: the first run's own grid), in that order; failed
+// re-runs are left out, and a failed first run is returned alone.
+std::vector<Evaluation> runs_with_reruns(const CampaignConfig& config, const CampaignConfig& nudge_space,
+                                         const std::map<std::string, double>& params,
+                                         const std::vector<ChannelResidual>* grid, int reruns, CaseRunner& runner) {
+  std::vector<Evaluation> runs = {runner.evaluate(config, params, grid)};
+  if (!runs.front().ok) return runs;
+  const std::vector<ChannelResidual> on = grid ? *grid : runs.front().residuals;
+  for (int k = 1; k <= reruns; ++k) {
+    Evaluation again = runner.evaluate(config, nudged(params, nudge_space, k), &on);
+    if (again.ok) runs.push_back(std::move(again));
   }
-  if (curves.size() < 2) return Diagnosis::kNaN;
+  return runs;
+}
+
+// The run of median error (of an even count, the worse middle one): a search keeps the luckiest run
+// it meets, so a fit is judged on the middle of its run and re-runs.
+Evaluation median_run(std::vector<Evaluation> runs) {
+  std::stable_sort(runs.begin(), runs.end(), [](const auto& a, const auto& b) { return a.error < b.error; });
+  return runs[runs.size() / 2];
+}
+
+// The simulation's own scatter per channel (into `per_channel`, "<case>/<channel>" -> N) and over
+// all channels (returned; NaN with fewer than two runs): half the mean square difference of each
+// pair of the runs' simulated curves (one set, re-run with its parameters moved by far less than
+// anything physical, on one grid) estimates the variance of one curve.
+double simulation_scatter(const std::vector<Evaluation>& runs, std::map<std::string, double>& per_channel) {
+  if (runs.size() < 2) return Diagnosis::kNaN;
+  const auto& first = runs.front().residuals;
   double total = 0;
-  for (std::size_t c = 0; c < base.size(); ++c) {
+  for (std::size_t c = 0; c < first.size(); ++c) {
     double sum = 0;
     int pairs = 0;
-    for (std::size_t i = 0; i < curves.size(); ++i)
-      for (std::size_t j = i + 1; j < curves.size(); ++j, ++pairs) {
-        const auto& a = curves[i][c].simulated;
-        const auto& b = curves[j][c].simulated;
+    for (std::size_t i = 0; i < runs.size(); ++i)
+      for (std::size_t j = i + 1; j < runs.size(); ++j, ++pairs) {
+        const auto& a = runs[i].residuals[c].simulated;
+        const auto& b = runs[j].residuals[c].simulated;
         double sq = 0;
         for (std::size_t k = 0; k < a.size(); ++k) sq += (a[k] - b[k]) * (a[k] - b[k]);
         sum += sq / static_cast<double>(std::max<std::size_t>(1, a.size())) / 2;
       }
     const double variance = sum / pairs;
-    per_channel[key_of(base[c])] = std::sqrt(variance);
+    per_channel[key_of(first[c])] = std::sqrt(variance);
     total += variance;
   }
-  return std::sqrt(total / static_cast<double>(std::max<std::size_t>(1, base.size())));
+  return std::sqrt(total / static_cast<double>(std::max<std::size_t>(1, first.size())));
 }
 
 // Sensitivity of the stacked curves to each free base parameter: one forward difference of 5 % of
@@ -892,9 +909,14 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   }
   const auto base_params = complete_parameters(config, d.base_params);
 
-  // 2. residual
-  const Evaluation base = runner.evaluate(config, base_params);
-  if (!base.ok) throw CampaignError("the base best set cannot be simulated: " + base.message);
+  // 2. residual, of the base best set judged like every candidate: on the run of median error among
+  // it and its re-runs, which also measure the simulation's own scatter
+  const std::vector<Evaluation> base_runs =
+      runs_with_reruns(config, config, base_params, nullptr, options.scatter_runs, runner);
+  if (!base_runs.front().ok) throw CampaignError("the base best set cannot be simulated: " + base_runs.front().message);
+  for (const auto& run : base_runs) d.base_rerun_errors.push_back(run.error);
+  const double scatter = simulation_scatter(base_runs, d.scatter);
+  const Evaluation base = median_run(base_runs);
   d.base_residuals = base.residuals;
   for (const auto& c : base.residuals) {
     d.base_rms[key_of(c)] = c.rms;
@@ -908,9 +930,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   d.held_out_error = base.held_out_error;
   d.held_out_checked = held_out_checks(d, options);
   const double noise = overall_noise(base.residuals);
-  // Scatter, sensitivities and signatures compare fitted curves only: held-out cases are not simulated for them.
+  // Sensitivities and signatures compare fitted curves only: held-out cases are not simulated for them.
   const CampaignConfig fitted = fitted_cases(config, options);
-  const double scatter = simulation_scatter(fitted, base_params, base.residuals, options.scatter_runs, runner, d.scatter);
   progress(options, "base RMS force error " + format_number(d.error_before) + " N, noise " + format_number(noise) +
                         " N, simulation scatter " + format_number(scatter) + " N");
 
@@ -1029,21 +1050,16 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.fitness = r.best.fitness;
         // on every case, the held-out ones included: the fit is judged on the data it did not use too
         best_sets[c.effect] = complete_parameters(ext, r.best.params);
-        std::vector<Evaluation> runs = {runner.evaluate(m.config, best_sets[c.effect], &base.residuals)};
+        // The best of many runs of a model that slips or snaps may be a lucky one: judged on the
+        // median of the best set's run and its re-runs.
+        const std::vector<Evaluation> runs =
+            runs_with_reruns(m.config, ext, best_sets[c.effect], &base.residuals, options.scatter_runs, runner);
         if (!runs.front().ok) {
           c.reason = "its best set cannot be re-simulated: " + runs.front().message;
           continue;
         }
-        // The best of many runs of a model that slips or snaps may be a lucky one: the best set
-        // re-run with its parameters moved by k x 1e-7 of themselves, and the candidate judged on
-        // the run of median error (of an even count, the worse middle one).
-        for (int k = 1; k <= options.scatter_runs; ++k) {
-          Evaluation again = runner.evaluate(m.config, nudged(best_sets[c.effect], ext, k), &base.residuals);
-          if (again.ok) runs.push_back(std::move(again));
-        }
         for (const auto& run : runs) c.rerun_errors.push_back(run.error);
-        std::stable_sort(runs.begin(), runs.end(), [](const auto& a, const auto& b) { return a.error < b.error; });
-        const Evaluation& e = runs[runs.size() / 2];
+        const Evaluation e = median_run(runs);
         c.residuals = e.residuals;
         c.error = e.error;
         for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
@@ -1096,7 +1112,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
 }
 
 json Diagnosis::to_json() const {
-  json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)}};
+  json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)},
+               {"rerun_errors", base_rerun_errors}};
   json residuals = json::array();
   for (const auto& r : base_residuals) residuals.push_back(r.to_json());
   base["residual"] = residuals;

@@ -20,6 +20,12 @@ namespace {
 
 std::string num(double v, int digits = 3) { return std::isfinite(v) ? detail::format_number(v, digits) : "–"; }
 
+std::string listed(const std::vector<double>& values) {
+  std::string text;
+  for (double v : values) text += (text.empty() ? "" : ", ") + num(v);
+  return text;
+}
+
 std::string file_safe(std::string s) {
   for (auto& ch : s)
     if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '-' && ch != '_') ch = '_';
@@ -73,6 +79,9 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
      << " N after. Simulations: " << d.simulations << "; wall time " << num(d.wall_time_s) << " s.\n\n"
      << "## Base fit\n\n| parameter | value |\n|---|---|\n";
   for (const auto& [k, v] : d.base_params) md << "| " << k << " | " << num(v, 4) << " |\n";
+  if (!d.base_rerun_errors.empty())
+    md << "\nRMS force error of the best set and of its re-runs with the parameters moved by 1e-7: "
+       << listed(d.base_rerun_errors) << " N; the residual below is that of the run of median error.\n";
   md << "\n## Residual of the base fit (measured − simulated)\n\n"
      << "Noise is estimated from each measured curve alone (local three-point pseudo-residuals, median "
         "absolute deviation). A positive mean means the model is too weak there. Effective points: "
@@ -106,8 +115,7 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
         "| criterion | verdict | why |\n"
         "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& c : d.candidates) {
-    std::string reruns;
-    for (double e : c.rerun_errors) reruns += (reruns.empty() ? "" : ", ") + num(e);
+    const std::string reruns = listed(c.rerun_errors);
     md << "| " << c.effect << " | " << (c.target.empty() ? "–" : c.target) << " | " << num(c.signature_score, 2)
        << " | " << c.simulations << " | " << num(c.error) << " | " << (reruns.empty() ? "–" : reruns) << " | "
        << num(c.held_out_error) << " | " << num(c.score) << " | " << c.verdict << " | " << c.reason << " |\n";

@@ -661,6 +661,11 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   const json d = test_support::read_json(dir / "out" / "diagnosis.json");
   EXPECT_TRUE(d["chosen"].is_array());
   EXPECT_TRUE(d["error_before"].is_number());
+  // the base judged like every candidate: on the median of its best run and two re-runs
+  auto reruns = d["base"]["rerun_errors"].get<std::vector<double>>();
+  ASSERT_EQ(reruns.size(), 3u);
+  std::sort(reruns.begin(), reruns.end());
+  EXPECT_DOUBLE_EQ(d["error_before"].get<double>(), reruns[1]);
   // the simulated curve's own scatter, measured on the fitted channel
   ASSERT_TRUE(d["scatter"].contains("main/load_vertical")) << d.dump();
   EXPECT_GE(d["scatter"]["main/load_vertical"].get<double>(), 0.0);

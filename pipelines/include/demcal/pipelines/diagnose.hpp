@@ -5,7 +5,8 @@
 //                    bias, trend, where along the curve it sits (initial branch, up to the peak,
 //                    after the peak) and with which sign, lag-1 autocorrelation, the measurement
 //                    noise estimated from the measured curve alone, and the simulation's own
-//                    scatter (B re-run with its parameters moved by 1e-7 of themselves);
+//                    scatter (B re-run with its parameters moved by 1e-7 of themselves; the
+//                    residual is that of the run of median error, as for every candidate);
 //   3. signatures    for every candidate effect (dem::effect_registry), the change of the simulated
 //                    curves when the effect is switched on at B (two magnitudes), and the base
 //                    parameters' own sensitivities (one finite difference each). An effect scores
@@ -185,8 +186,9 @@ struct DiagnoseOptions {
   // Re-runs of the base best with every free parameter moved by k x 1e-7 of itself (k = 1..n): the
   // simulation's own scatter, since stick-slip events of a block model fall at other moments for
   // parameter sets that differ by far less than anything physical. It counts with the measurement
-  // noise in the "nothing to explain" test. Each tried candidate's best set is re-run alike, and
-  // judged on the run of median error, so that one lucky run does not decide. 0 = neither, >= 0.
+  // noise in the "nothing to explain" test. The base and each tried candidate are judged on the run
+  // of median error among the best set's and these, so that one lucky run does not decide. 0 =
+  // neither, >= 0.
   int scatter_runs = 2;
   // Base parameters in each candidate calibration: log-scaled ones within best x/÷ narrow_log_factor
   // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range, then clipped to
@@ -267,6 +269,10 @@ struct Diagnosis {
   std::map<std::string, double> base_params;
   double base_fitness = kNaN;
   std::map<std::string, double> base_rms;  // "<case>/<channel>" -> N
+  // The overall error of the base best set and of its re-runs (DiagnoseOptions::scatter_runs); like
+  // a candidate, the base is judged on the run of median error: base_rms, base_residuals and
+  // error_before are that run's.
+  std::vector<double> base_rerun_errors;
   std::map<std::string, double> noise;     // "<case>/<channel>" -> N
   std::map<std::string, double> scatter;   // "<case>/<channel>" -> N, the simulation's own (scatter_runs)
   std::vector<ChannelResidual> base_residuals;
