@@ -384,9 +384,11 @@ std::vector<Evaluation> runs_with_reruns(const CampaignConfig& config, const Cam
 
 // The run of median error (of an even count, the worse middle one): a search keeps the luckiest run
 // it meets, so a fit is judged on the middle of its run and re-runs.
-Evaluation median_run(std::vector<Evaluation> runs) {
-  std::stable_sort(runs.begin(), runs.end(), [](const auto& a, const auto& b) { return a.error < b.error; });
-  return runs[runs.size() / 2];
+const Evaluation& median_run(const std::vector<Evaluation>& runs) {
+  std::vector<const Evaluation*> by_error;
+  for (const auto& run : runs) by_error.push_back(&run);
+  std::stable_sort(by_error.begin(), by_error.end(), [](const auto* a, const auto* b) { return a->error < b->error; });
+  return *by_error[by_error.size() / 2];
 }
 
 // The simulation's own scatter per channel (into `per_channel`, "<case>/<channel>" -> N) and over
@@ -617,22 +619,21 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
 // points of common_effective_points over the base and those candidates (kept in the diagnosis);
 // returns them in the order of the base residuals.
 std::vector<double> score_candidates(Diagnosis& d) {
+  std::vector<EffectCandidate*> scored;
   std::vector<const std::vector<ChannelResidual>*> fits = {&d.base_residuals};
-  std::vector<std::string> names = {"base"};
-  for (const auto& c : d.candidates)
+  for (auto& c : d.candidates)
     if (c.tried && c.residuals.size() == d.base_residuals.size()) {
+      scored.push_back(&c);
       fits.push_back(&c.residuals);
-      names.push_back(c.effect);
     }
   std::vector<int> from;
   const std::vector<double> points = common_effective_points(fits, &from);
   for (std::size_t i = 0; i < points.size(); ++i) {
     d.effective_points[key_of(d.base_residuals[i])] = points[i];
-    d.effective_points_from[key_of(d.base_residuals[i])] = names[static_cast<std::size_t>(from[i])];
+    d.effective_points_from[key_of(d.base_residuals[i])] =
+        from[i] == 0 ? "base" : scored[static_cast<std::size_t>(from[i] - 1)]->effect;
   }
-  for (auto& c : d.candidates)
-    if (c.tried && c.residuals.size() == d.base_residuals.size())
-      c.score = information_criterion_change(d.base_residuals, c.residuals, c.effect_parameters, points);
+  for (auto* c : scored) c->score = information_criterion_change(d.base_residuals, c->residuals, c->effect_parameters, points);
   return points;
 }
 
@@ -916,7 +917,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   if (!base_runs.front().ok) throw CampaignError("the base best set cannot be simulated: " + base_runs.front().message);
   for (const auto& run : base_runs) d.base_rerun_errors.push_back(run.error);
   const double scatter = simulation_scatter(base_runs, d.scatter);
-  const Evaluation base = median_run(base_runs);
+  const Evaluation& base = median_run(base_runs);
   d.base_residuals = base.residuals;
   for (const auto& c : base.residuals) {
     d.base_rms[key_of(c)] = c.rms;
@@ -1059,7 +1060,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
           continue;
         }
         for (const auto& run : runs) c.rerun_errors.push_back(run.error);
-        const Evaluation e = median_run(runs);
+        const Evaluation& e = median_run(runs);
         c.residuals = e.residuals;
         c.error = e.error;
         for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
@@ -1148,7 +1149,7 @@ json Diagnosis::to_json() const {
   }
   json points = json::object();
   for (const auto& [key, n] : effective_points)
-    points[key] = {{"points", n}, {"from", effective_points_from.count(key) ? effective_points_from.at(key) : ""}};
+    points[key] = {{"points", n}, {"from", effective_points_from.at(key)}};
   return {{"status", status},
           {"message", message},
           {"base", base},
