@@ -236,6 +236,8 @@ void Scene::Validate(const std::string& source) const {
   if (solver.time_step_safety > 1)
     throw SceneError(s + "solver.time_step_safety", "must not exceed 1, got " + format_value(solver.time_step_safety));
   require_non_negative(solver.time_step, s + "solver.time_step");
+  if (solver.time_step_faces != "all" && solver.time_step_faces != "in_contact")
+    throw SceneError(s + "solver.time_step_faces", "must be all or in_contact, got '" + solver.time_step_faces + "'");
   require_finite(solver.density_scaling, s + "solver.density_scaling");
   if (solver.density_scaling < 1)
     throw SceneError(s + "solver.density_scaling", "must be >= 1, got " + format_value(solver.density_scaling));
@@ -353,6 +355,7 @@ Scene scene_from_json(const json& j, const std::string& source) {
     sv.local_damping = c.number("local_damping", sv.local_damping);
     sv.time_step_safety = c.number("time_step_safety", sv.time_step_safety);
     sv.time_step = c.number("time_step", sv.time_step);
+    sv.time_step_faces = c.string("time_step_faces", sv.time_step_faces);
     sv.density_scaling = c.number("density_scaling", sv.density_scaling);
     sv.equilibrium_ratio = c.number("equilibrium_ratio", sv.equilibrium_ratio);
     sv.max_equilibrium_time = c.number("max_equilibrium_time", sv.max_equilibrium_time);
@@ -450,6 +453,8 @@ json scene_to_json(const Scene& scene) {
                  {"equilibrium_ratio", sv.equilibrium_ratio}, {"max_equilibrium_time", sv.max_equilibrium_time},
                  {"max_time", sv.max_time},                   {"collapse_displacement", sv.collapse_displacement},
                  {"max_velocity", sv.max_velocity}};
+  // Written only when not the default, so that scenes written before the key keep their hash.
+  if (sv.time_step_faces != SolverSettings{}.time_step_faces) j["solver"]["time_step_faces"] = sv.time_step_faces;
   const Loading& l = scene.loading;
   j["loading"] = {{"type", l.type}};
   if (l.type != "none")

@@ -40,6 +40,9 @@ struct Body {
   // the position; vertex(i) and normal(i) read them as vectors.
   std::vector<double> world_x, world_y, normal_x, normal_y, edge_offset;
   std::vector<double> edge_lengths;
+  // Edges that have carried contact nodes (an open contact within the search margin included), for
+  // the time step's bound; never cleared.
+  std::vector<char> edge_in_contact;
   Vec2 start_position = Vec2::Zero();
   Vec2 position = Vec2::Zero();
   double angle = 0;
@@ -161,7 +164,9 @@ class Engine {
     setup_loading();
     setup_gap();
     sat_scratch_.assign(max_vertices_, 0.0);
-    dt_ = scene_.solver.time_step > 0 ? scene_.solver.time_step : critical_time_step() * scene_.solver.time_step_safety;
+    const bool automatic = scene_.solver.time_step <= 0;
+    step_follows_contacts_ = automatic && scene_.solver.time_step_faces == "in_contact";
+    dt_ = automatic ? critical_time_step() * scene_.solver.time_step_safety : scene_.solver.time_step;
   }
 
   Recording run(const RunControl& control);
@@ -172,6 +177,12 @@ class Engine {
   void setup_loading();
   void setup_gap();
   double critical_time_step() const;
+  // Marks a body's edge as in contact; a first mark makes the automatic step be estimated again.
+  void note_edge_in_contact(Body& body, int edge) {
+    if (body.edge_in_contact[edge]) return;
+    body.edge_in_contact[edge] = 1;
+    contact_edges_changed_ = true;
+  }
   int group_for(const Body& a, const Body& b, const Vec2& normal) const;
   void compute_forces();
   void sweep(double margin);  // pairs_ <- every pair whose boxes, grown by margin, overlap (sorted)
@@ -248,6 +259,8 @@ class Engine {
   double cos_edge_tolerance_ = 1;
   double margin_ = 0;
   double dt_ = 0;
+  bool step_follows_contacts_ = true;   // the automatic step over the faces in contact (time_step_faces)
+  bool contact_edges_changed_ = false;  // an edge was first marked in contact in this step
   double max_weight_ = 0;
   bool loading_stage_ = false;
   long integrations_ = 0;
@@ -299,6 +312,7 @@ void Engine::build_bodies() {
     }
     for (auto* soa : {&body.world_x, &body.world_y, &body.normal_x, &body.normal_y, &body.edge_offset})
       soa->assign(body.local.size(), 0.0);
+    body.edge_in_contact.assign(body.local.size(), 0);
     max_vertices_ = std::max(max_vertices_, body.local.size());
     body.position = body.start_position = c;
     body.mass = b.density * scene_.width * geometry::signed_area(b.vertices);
@@ -377,9 +391,11 @@ void Engine::setup_loading() {
   for (const auto& f : constant_forces_) max_weight_ = std::max(max_weight_, f.force.norm());
 }
 
-// Upper bound of the highest natural frequency per body: every face in full contact with the
-// stiffest group (trace of the 3x3 stiffness over the inertia), doubled for two-body coupling.
+// Upper bound of the highest natural frequency per body: every face that has been in contact (or,
+// with time_step_faces "all" or before a block's first contact, every face) in full contact with
+// the stiffest group (trace of the 3x3 stiffness over the inertia), doubled for two-body coupling.
 double Engine::critical_time_step() const {
+  const bool all_faces = scene_.solver.time_step_faces == "all";
   double kn = 0, ks = 0;
   for (const auto& g : groups_) {
     // Hyperbolic closure stiffens the joint up to kClosureStiffening x kn.
@@ -393,7 +409,10 @@ double Engine::critical_time_step() const {
     if (b.fixed) continue;
     double k_translation = 0, k_rotation = 0;
     const std::size_t n = b.local.size();
+    const bool every_face =
+        all_faces || std::find(b.edge_in_contact.begin(), b.edge_in_contact.end(), 1) == b.edge_in_contact.end();
     for (std::size_t e = 0; e < n; ++e) {
+      if (!every_face && !b.edge_in_contact[e]) continue;
       const Vec2 r1 = b.local[e], r2 = b.local[(e + 1) % n];
       const double length = (r2 - r1).norm();
       const Vec2 t = (r2 - r1) / length, normal(t.y(), -t.x());
@@ -564,6 +583,7 @@ bool Engine::pair_geometry(int ia, int ib, int& contact_index, PairWork& work) {
     if (hi - lo <= 1e-9 * ref_length) return false;
     const double g1 = (q1 - r1).dot(normal), g2 = (q2 - r1).dot(normal);
     span = {lo, (hi - lo) / (points_ - 1), s1, g1, (g2 - g1) / (s2 - s1)};
+    note_edge_in_contact(ref_on_a ? b : a, inc_edge);
   } else {
     // Corner against face: the deepest vertex of the incident polygon, if it lies over the face.
     int deepest = 0;
@@ -583,7 +603,10 @@ bool Engine::pair_geometry(int ia, int ib, int& contact_index, PairWork& work) {
     work.corner_s = s;
     work.corner_gap = depth;
     work.corner_length = shorter / (2.0 * (points_ - 1));
+    note_edge_in_contact(ref_on_a ? b : a, previous);
+    note_edge_in_contact(ref_on_a ? b : a, deepest);
   }
+  note_edge_in_contact(ref_on_a ? a : b, ref_edge);
 
   const Vec2 normal_ab = ref_on_a ? normal : Vec2(-normal);
   const Vec2 tangent_ab = perp(normal_ab);
@@ -865,6 +888,8 @@ void Engine::compute_forces() {
         pair_geometry(c.first, c.second, c.contact, work_[touching]))
       ++touching;
   for (std::size_t i = 0; i < touching; ++i) pair_forces(work_[i]);
+  if (contact_edges_changed_ && step_follows_contacts_) dt_ = critical_time_step() * scene_.solver.time_step_safety;
+  contact_edges_changed_ = false;
   first_step_ = false;
   for (Contact& c : contacts_) {
     c.active = c.seen;
@@ -971,7 +996,6 @@ void Engine::record_row(double load_time, double force) {
 Recording Engine::run(const RunControl& control) {
   const auto started = std::chrono::steady_clock::now();
   rec_ = Recording{};
-  rec_.time_step = dt_;
   for (const Gauge& g : scene_.gauges) rec_.gauge_names.push_back(g.name);
   rec_.gauge_values.assign(scene_.gauges.size(), {});
   const SolverSettings& sv = scene_.solver;
@@ -1049,6 +1073,7 @@ Recording Engine::run(const RunControl& control) {
   rec_.status = status;
   rec_.message = message;
   rec_.steps = steps;
+  rec_.time_step = dt_;
   rec_.contact_point_updates = node_updates_;
   finish(rec_);
   rec_.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();

@@ -70,6 +70,45 @@ TEST(ContactDetection, BlockDroppedFromBeyondTheBroadPhaseSkinLandsAndRests) {
   EXPECT_NEAR(block_named(r, "block").displacement.y(), -0.03 - closure, 0.1 * closure);
 }
 
+// The automatic time step of a free block b x h (width 0.2 m) whose horizontal and vertical faces
+// in full contact number `horizontal` and `vertical`: safety 0.5 x 2/omega with omega^2 =
+// 2 (k_t/m + k_r/I), each face of length L adding k_t = w L (kn + ks) and k_r = w (kn L^3/12 +
+// ks L d^2), where d is the face's distance from the centroid (normal springs about the face's
+// middle, shear springs at d).
+double block_time_step(double b, double h, int horizontal, int vertical, double kn, double ks, double density) {
+  const double w = 0.2, m = density * w * b * h, inertia = m * (b * b + h * h) / 12;
+  const double k_t = w * (kn + ks) * (horizontal * b + vertical * h);
+  const double k_r = w * (horizontal * (kn * b * b * b / 12 + ks * b * h * h / 4) +
+                          vertical * (kn * h * h * h / 12 + ks * h * b * b / 4));
+  return 0.5 * 2 / std::sqrt(2 * (k_t / m + k_r / inertia));
+}
+
+TEST(TimeStep, CountsTheFacesInContactAsTheyComeIntoContact) {
+  // A block dropped onto the base: before it lands all four faces count, after only its bottom.
+  Scene s = block_on_base(0.2, 0.1, 0, 30);
+  for (auto& v : s.blocks[1].vertices) v.y() += 0.03;
+  s.solver.max_equilibrium_time = 5;
+  s.solver.time_step_faces = "in_contact";
+  const Recording landed = simulate(s);
+  ASSERT_EQ(landed.status, RunStatus::completed) << landed.message;
+  const double one_face = block_time_step(0.2, 0.1, 1, 0, 1e9, 4e8, 2000);
+  EXPECT_NEAR(landed.time_step, one_face, 1e-12 * one_face);
+  // A second block dropped onto the first: the first now touches with its top face too, and the
+  // step shrinks to that of a block with two faces in contact.
+  s.blocks.push_back(box("second", -0.1, 0.16, 0.1, 0.26, false));
+  const Recording stacked = simulate(s);
+  ASSERT_EQ(stacked.status, RunStatus::completed) << stacked.message;
+  const double two_faces = block_time_step(0.2, 0.1, 2, 0, 1e9, 4e8, 2000);
+  EXPECT_NEAR(stacked.time_step, two_faces, 1e-12 * two_faces);
+  EXPECT_NEAR(block_named(stacked, "second").displacement.y(), -0.06, 1e-4);
+  // time_step_faces "all" (the default): every face of every block from the start.
+  s.solver.time_step_faces = "all";
+  const Recording all = simulate(s);
+  ASSERT_EQ(all.status, RunStatus::completed) << all.message;
+  const double four_faces = block_time_step(0.2, 0.1, 2, 2, 1e9, 4e8, 2000);
+  EXPECT_NEAR(all.time_step, four_faces, 1e-12 * four_faces);
+}
+
 TEST(Incline, SlidesJustAboveFriction) {
   Scene s = block_on_base(0.2, 0.1, std::atan(1.02 * std::tan(30 * kDeg)), 30);
   s.solver.max_equilibrium_time = 2;

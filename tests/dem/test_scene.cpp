@@ -131,6 +131,19 @@ TEST_F(SceneFiles, UnknownLoadedBlockIsNamed) {
   expect_rejected(j.dump(), {"loading.block", "ghost"});
 }
 
+TEST_F(SceneFiles, UnknownTimeStepFacesAreNamed) {
+  json j = small_scene();
+  j["solver"] = json::parse(R"({"time_step_faces": "some"})");
+  expect_rejected(j.dump(), {"solver.time_step_faces", "all or in_contact", "'some'"});
+  // The non-default value round-trips; the default is not written (older scenes keep their hash).
+  j["solver"]["time_step_faces"] = "in_contact";
+  const Scene in_contact = scene_from_json(j, "in_contact");
+  EXPECT_EQ(in_contact.solver.time_step_faces, "in_contact");
+  EXPECT_EQ(scene_to_json(in_contact)["solver"]["time_step_faces"], "in_contact");
+  j["solver"].erase("time_step_faces");
+  EXPECT_FALSE(scene_to_json(scene_from_json(j, "default"))["solver"].contains("time_step_faces"));
+}
+
 TEST_F(SceneFiles, GeneratedSceneRoundTripsAndSimulates) {
   const std::string scene = (dir_ / "arch.json").string();
   CommandResult r = run_demcal("scene arch --voussoirs 9 --contacts-per-joint 5 --max-displacement 0.001 -o " + scene);
