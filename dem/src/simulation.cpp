@@ -41,7 +41,7 @@ struct Body {
   std::vector<double> world_x, world_y, normal_x, normal_y, edge_offset;
   std::vector<double> edge_lengths;
   // Edges that have carried contact nodes (an open contact within the search margin included), for
-  // the time step's bound; never cleared.
+  // the time step's bound; marked only with time_step_faces "in_contact", never cleared.
   std::vector<char> edge_in_contact;
   Vec2 start_position = Vec2::Zero();
   Vec2 position = Vec2::Zero();
@@ -177,9 +177,10 @@ class Engine {
   void setup_loading();
   void setup_gap();
   double critical_time_step() const;
-  // Marks a body's edge as in contact; a first mark makes the automatic step be estimated again.
+  // Marks a body's edge as in contact when the step follows the contacts; a first mark makes the
+  // step be estimated again.
   void note_edge_in_contact(Body& body, int edge) {
-    if (body.edge_in_contact[edge]) return;
+    if (!step_follows_contacts_ || body.edge_in_contact[edge]) return;
     body.edge_in_contact[edge] = 1;
     contact_edges_changed_ = true;
   }
@@ -259,7 +260,7 @@ class Engine {
   double cos_edge_tolerance_ = 1;
   double margin_ = 0;
   double dt_ = 0;
-  bool step_follows_contacts_ = true;   // the automatic step over the faces in contact (time_step_faces)
+  bool step_follows_contacts_ = false;  // the automatic step over the faces in contact (time_step_faces)
   bool contact_edges_changed_ = false;  // an edge was first marked in contact in this step
   double max_weight_ = 0;
   bool loading_stage_ = false;
@@ -391,11 +392,10 @@ void Engine::setup_loading() {
   for (const auto& f : constant_forces_) max_weight_ = std::max(max_weight_, f.force.norm());
 }
 
-// Upper bound of the highest natural frequency per body: every face that has been in contact (or,
-// with time_step_faces "all" or before a block's first contact, every face) in full contact with
-// the stiffest group (trace of the 3x3 stiffness over the inertia), doubled for two-body coupling.
+// Upper bound of the highest natural frequency per body: every face marked in contact (every face
+// of a block with none marked, so every face with time_step_faces "all") in full contact with the
+// stiffest group (trace of the 3x3 stiffness over the inertia), doubled for two-body coupling.
 double Engine::critical_time_step() const {
-  const bool all_faces = scene_.solver.time_step_faces == "all";
   double kn = 0, ks = 0;
   for (const auto& g : groups_) {
     // Hyperbolic closure stiffens the joint up to kClosureStiffening x kn.
@@ -409,8 +409,7 @@ double Engine::critical_time_step() const {
     if (b.fixed) continue;
     double k_translation = 0, k_rotation = 0;
     const std::size_t n = b.local.size();
-    const bool every_face =
-        all_faces || std::find(b.edge_in_contact.begin(), b.edge_in_contact.end(), 1) == b.edge_in_contact.end();
+    const bool every_face = std::find(b.edge_in_contact.begin(), b.edge_in_contact.end(), 1) == b.edge_in_contact.end();
     for (std::size_t e = 0; e < n; ++e) {
       if (!every_face && !b.edge_in_contact[e]) continue;
       const Vec2 r1 = b.local[e], r2 = b.local[(e + 1) % n];
@@ -888,7 +887,7 @@ void Engine::compute_forces() {
         pair_geometry(c.first, c.second, c.contact, work_[touching]))
       ++touching;
   for (std::size_t i = 0; i < touching; ++i) pair_forces(work_[i]);
-  if (contact_edges_changed_ && step_follows_contacts_) dt_ = critical_time_step() * scene_.solver.time_step_safety;
+  if (contact_edges_changed_) dt_ = critical_time_step() * scene_.solver.time_step_safety;
   contact_edges_changed_ = false;
   first_step_ = false;
   for (Contact& c : contacts_) {
