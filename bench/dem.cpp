@@ -31,7 +31,7 @@ void run_scene(benchmark::State& state, const Scene& scene, bool any_status = fa
 }
 
 // The benchmark argument `faces`: 0 = the automatic step over every face (`time_step_faces` "all",
-// the default), 1 = over the faces in contact ("in_contact").
+// the engine's earlier default), 1 = over the faces in contact ("in_contact", the default).
 Scene with_step_faces(Scene scene, benchmark::State& state, std::int64_t faces) {
   scene.solver.time_step_faces = faces == 0 ? "all" : "in_contact";
   state.SetLabel("time_step_faces " + scene.solver.time_step_faces);

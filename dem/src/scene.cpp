@@ -453,8 +453,9 @@ json scene_to_json(const Scene& scene) {
                  {"equilibrium_ratio", sv.equilibrium_ratio}, {"max_equilibrium_time", sv.max_equilibrium_time},
                  {"max_time", sv.max_time},                   {"collapse_displacement", sv.collapse_displacement},
                  {"max_velocity", sv.max_velocity}};
-  // Written only when not the default, so that scenes written before the key keep their hash.
-  if (sv.time_step_faces != SolverSettings{}.time_step_faces) j["solver"]["time_step_faces"] = sv.time_step_faces;
+  // Always written: the default changed from "all" to "in_contact", so a scene's hash (the archive's
+  // key of its runs) must tell the two apart.
+  j["solver"]["time_step_faces"] = sv.time_step_faces;
   const Loading& l = scene.loading;
   j["loading"] = {{"type", l.type}};
   if (l.type != "none")

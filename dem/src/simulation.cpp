@@ -1046,8 +1046,11 @@ Recording Engine::run(const RunControl& control) {
     loading_stage_ = true;
     const Loading& l = scene_.loading;
     double load_time = 0, next_record = 0;
+    const double travel_time = l.max_displacement / l.velocity;
+    bool last_step = false;
+    double regular_step = dt_;  // the step before the last, cut one (reported)
     while (true) {
-      actuator_travel_ = std::min(l.velocity * load_time, l.max_displacement);
+      actuator_travel_ = last_step ? l.max_displacement : std::min(l.velocity * load_time, l.max_displacement);
       compute_forces();
       if (actuator_travel_ >= next_record - 1e-15) {
         record_row(load_time, actuator_force());
@@ -1062,12 +1065,21 @@ Recording Engine::run(const RunControl& control) {
         message = "max_time of " + std::to_string(sv.max_time) + " s reached";
         break;
       }
+      // The last step is cut to the time left, so that the anchor ends exactly at max_displacement
+      // with the blocks moved over the same time; a full step clamped at the end would leave the
+      // actuator's spring short by up to velocity x dt, and the last row's force low by k v dt.
+      if (load_time + dt_ >= travel_time) {
+        last_step = true;
+        regular_step = dt_;
+        dt_ = travel_time - load_time;
+      }
       integrate();
       time += dt_;
       load_time += dt_;
       ++steps;
       if (stopped()) break;
     }
+    if (last_step) dt_ = regular_step;
   }
   rec_.status = status;
   rec_.message = message;

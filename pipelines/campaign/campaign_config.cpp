@@ -82,10 +82,17 @@ SceneSpec parse_scene(const json& j, const std::string& base_dir, const std::str
     spec.file = resolve(j.get<std::string>(), base_dir);
     return spec;
   }
-  reject_unknown_keys(j, {"file", "generator", "options"}, where);
+  reject_unknown_keys(j, {"file", "generator", "options", "solver"}, where);
   read_field(j, "file", spec.file, where);
   read_field(j, "generator", spec.generator, where);
   if (j.contains("options")) spec.options = j.at("options");
+  if (j.contains("solver")) {
+    spec.solver = j.at("solver");
+    reject_unknown_keys(spec.solver,
+                        {"local_damping", "time_step_safety", "time_step", "time_step_faces", "density_scaling",
+                         "equilibrium_ratio", "max_equilibrium_time", "max_time", "collapse_displacement", "max_velocity"},
+                        where + ".solver");
+  }
   spec.file = resolve(spec.file, base_dir);
   if (!spec.file.empty() && !spec.generator.empty())
     throw CampaignError(where + ": give either 'file' or 'generator', not both");
@@ -261,6 +268,7 @@ json scene_to_json_spec(const SceneSpec& s) {
     j["generator"] = s.generator;
     j["options"] = s.options;
   }
+  if (!s.solver.empty()) j["solver"] = s.solver;
   return j;
 }
 
@@ -647,9 +655,9 @@ template <class T>
 void option(const json& j, const char* key, T& out, const std::string& where) {
   read_field(j, key, out, where);
 }
-}  // namespace
 
-dem::Scene build_scene(const SceneSpec& spec, const std::string& where) {
+// The scene of a file or a generator, as it comes.
+dem::Scene generate_scene(const SceneSpec& spec, const std::string& where) {
   if (!spec.file.empty()) return dem::load_scene(spec.file);
   const json& o = spec.options;
   const std::string at = where + ".options";
@@ -709,6 +717,21 @@ dem::Scene build_scene(const SceneSpec& spec, const std::string& where) {
     return dem::make_wall(w);
   }
   throw CampaignError(where + ": no scene file or generator");
+}
+
+// The spec's solver settings laid over the scene's, validated as a scene file's would be.
+dem::Scene with_solver_settings(dem::Scene scene, const SceneSpec& spec, const std::string& where) {
+  if (spec.solver.empty()) return scene;
+  json j = dem::scene_to_json(scene);
+  j["solver"].update(spec.solver);
+  scene.solver = dem::scene_from_json(j, where).solver;  // the rest kept as built, bit for bit
+  return scene;
+}
+
+}  // namespace
+
+dem::Scene build_scene(const SceneSpec& spec, const std::string& where) {
+  return with_solver_settings(generate_scene(spec, where), spec, where);
 }
 
 }  // namespace demcal::pipelines

@@ -72,7 +72,10 @@ void setup(CLI::App& app) {
   sub->add_flag("--resume", o.resume, "Continue interrupted calibrations from their archives");
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");
   sub->add_flag("--no-parameter-bounds", flags->no_bounds,
-                "Skip the check of how tightly the data pin an accepted effect's parameters (4 runs each)");
+                "Skip the check of how tightly the data pin an accepted effect's parameters (4 runs each, and re-fits)");
+  sub->add_option("--profile-simulations", o.profile_evaluations,
+                  "Runs per re-fit of the other parameters at a value the bounds' check rules out (0 = no re-fit)")
+      ->capture_default_str();
   sub->add_flag("--quiet", flags->quiet, "No progress lines");
   sub->callback([flags] { run(*flags); });
 }

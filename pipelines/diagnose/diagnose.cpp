@@ -34,6 +34,7 @@ void DiagnoseOptions::Validate() const {
   if (candidate_evaluations < 0) fail("candidate_evaluations", std::to_string(candidate_evaluations), "must be >= 0");
   if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
+  if (profile_evaluations < 0) fail("profile_evaluations", std::to_string(profile_evaluations), "must be >= 0");
   if (scatter_runs < 0) fail("scatter_runs", std::to_string(scatter_runs), "must be >= 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
   if (!(held_out_tolerance >= 0)) fail("held_out_tolerance", std::to_string(held_out_tolerance), "must be >= 0");
@@ -590,28 +591,64 @@ std::vector<double> bound_trial_values(const dem::EffectParameter& p, double bes
   return values;
 }
 
-// The bounds of every parameter of candidate c's effect (its fit re-simulated on the fitted cases
-// with one parameter moved at a time), within the diagnosis's simulation budget.
+// The other free parameters of `m` re-fitted with `name` held at `value` (LN_BOBYQA from `best`,
+// at most profile_evaluations runs): the smallest criterion change against candidate c's fit,
+// NaN when nothing else is free or every run failed.
+double refitted_change(const EffectCandidate& c, const ExtendedModel& m, const CampaignConfig& fitted,
+                       const std::map<std::string, double>& best, const std::string& name, double value,
+                       const std::vector<ChannelResidual>& grid, const std::vector<double>& effective_points,
+                       CaseRunner& runner, const DiagnoseOptions& options) {
+  const optimise::ParameterSpace& full = m.config.space;
+  optimise::ParameterSpace others;
+  for (const auto& spec : full.free_parameters())
+    if (spec.name != name) others.add(spec);
+  if (others.dimension() == 0) return Diagnosis::kNaN;
+  for (const auto& [fixed_name, fixed_value] : full.fixed_parameters()) others.fix(fixed_name, fixed_value);
+  others.fix(name, value);
+  if (const auto& t = full.tied_parameter()) others.tie(t->name, t->source, t->ratio);
+  Eigen::VectorXd start(others.dimension());
+  const auto names = others.free_names();
+  const Eigen::VectorXd lower = others.lower_bounds(), upper = others.upper_bounds();
+  for (int i = 0; i < others.dimension(); ++i) start[i] = std::clamp(best.at(names[i]), lower[i], upper[i]);
+  optimise::PolishOptions polish;
+  polish.max_evaluations = options.profile_evaluations;
+  const auto optimiser = optimise::make_polisher(others, start, polish);
+  const auto summary = optimise::minimise(*optimiser, [&](const Eigen::VectorXd& x) {
+    std::map<std::string, double> params = best;
+    for (const auto& [key, v] : others.values(x)) params[key] = v;
+    const Evaluation e = runner.evaluate(fitted, params, &grid);
+    return e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : HUGE_VAL;
+  });
+  return std::isfinite(summary.best_value) ? summary.best_value : Diagnosis::kNaN;
+}
+
+// The bounds of every parameter of candidate c's effect (profile_bound: its fit re-simulated on the
+// fitted cases with one parameter moved, the others re-fitted where that one run rules the value
+// out), within the diagnosis's simulation budget.
 void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const std::map<std::string, double>& best,
                              const std::vector<ChannelResidual>& grid, const std::vector<double>& effective_points,
                              CaseRunner& runner, const DiagnoseOptions& options) {
   const CampaignConfig fitted = fitted_cases(m.config, options);
   const long runs_per_trial = static_cast<long>(fitted.cases.size());
+  const auto within_budget = [&](long runs) {
+    return options.max_simulations <= 0 || runner.simulations() + runs_per_trial * runs <= options.max_simulations;
+  };
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
     const std::string& name = m.parameter_names[i];
     if (!best.count(name)) continue;
     const auto values = bound_trial_values(m.parameters[i], best.at(name), friction_cap(name, best));
-    if (options.max_simulations > 0 &&
-        runner.simulations() + runs_per_trial * static_cast<long>(values.size()) > options.max_simulations)
-      return;  // over the budget: the remaining parameters stay unchecked
-    std::vector<std::pair<double, double>> trials;
-    for (double v : values) {
+    if (!within_budget(static_cast<long>(values.size()))) return;  // over the budget: the rest stay unchecked
+    const auto conditional = [&](double v) {
       std::map<std::string, double> params = best;
       params[name] = v;
       const Evaluation e = runner.evaluate(fitted, params, &grid);
-      trials.emplace_back(v, e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : Diagnosis::kNaN);
-    }
-    c.bounds.push_back(bound_from_trials(name, best.at(name), trials, options.evidence_threshold));
+      return e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : Diagnosis::kNaN;
+    };
+    const auto refitted = [&](double v) {
+      if (options.profile_evaluations == 0 || !within_budget(options.profile_evaluations)) return Diagnosis::kNaN;
+      return refitted_change(c, m, fitted, best, name, v, grid, effective_points, runner, options);
+    };
+    c.bounds.push_back(profile_bound(name, best.at(name), values, conditional, refitted, options.evidence_threshold));
   }
 }
 
@@ -1093,7 +1130,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
           for (const auto& b : c.bounds) bounds.push_back(b.describe());
       }
       if (!bounds.empty()) {
-        d.verdict += " How tightly the data pin it, each parameter moved alone:";
+        d.verdict += " How tightly the data pin it, each parameter moved with the others re-fitted:";
         for (std::size_t i = 0; i < bounds.size(); ++i) d.verdict += (i ? "; " : " ") + bounds[i];
         d.verdict += ".";
       }

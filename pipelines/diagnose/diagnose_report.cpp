@@ -165,13 +165,17 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
       md << ".\n\n";
     }
     if (c.bounds.empty()) continue;
-    md << "How tightly the data pin the effect's parameters: each moved alone, the others at the best set; a value "
-          "is ruled out when the criterion rises by more than " << num(options.evidence_threshold)
+    md << "How tightly the data pin the effect's parameters: each moved from the best set, the other free "
+          "parameters re-fitted where the move alone fits worse (marked *); a value is ruled out when the criterion "
+          "still rises by more than " << num(options.evidence_threshold)
        << " (the margin an effect needs to be accepted).\n\n| parameter | values tried (criterion change) | bound |\n|---|---|---|\n";
     for (const auto& b : c.bounds) {
       md << "| " << b.name << " | ";
-      for (std::size_t i = 0; i < b.trials.size(); ++i)
-        md << (i ? ", " : "") << num(b.trials[i].first) << " (" << num(b.trials[i].second, 2) << ")";
+      for (std::size_t i = 0; i < b.trials.size(); ++i) {
+        const double v = b.trials[i].first;
+        const bool refit = std::find(b.refitted.begin(), b.refitted.end(), v) != b.refitted.end();
+        md << (i ? ", " : "") << num(v) << " (" << num(b.trials[i].second, 2) << (refit ? "*" : "") << ")";
+      }
       md << " | " << b.describe() << " |\n";
     }
     md << "\n";

@@ -297,6 +297,35 @@ ParameterBound bound_from_trials(const std::string& name, double best, std::vect
   return b;
 }
 
+ParameterBound profile_bound(const std::string& name, double best, const std::vector<double>& values,
+                             const std::function<double(double)>& conditional,
+                             const std::function<double(double)>& refitted, double threshold) {
+  std::vector<std::pair<double, double>> trials;
+  for (double v : values) trials.emplace_back(v, conditional(v));
+  std::sort(trials.begin(), trials.end());
+  std::vector<double> refitted_values;
+  // Outward from the best on one side: trials [from, to) in the order `step` walks them.
+  const auto walk_side = [&](long from, long to, long step) {
+    for (long i = from; i != to; i += step) {
+      auto& [value, change] = trials[static_cast<std::size_t>(i)];
+      if (!(change > threshold)) continue;
+      const double after = refitted(value);
+      if (std::isfinite(after)) {
+        change = std::min(change, after);
+        refitted_values.push_back(value);
+      }
+      if (change > threshold) return;  // still ruled out: the side's bound
+    }
+  };
+  const long above = std::upper_bound(trials.begin(), trials.end(), std::make_pair(best, HUGE_VAL)) - trials.begin();
+  walk_side(above - 1, -1, -1);
+  walk_side(above, static_cast<long>(trials.size()), 1);
+  ParameterBound b = bound_from_trials(name, best, std::move(trials), threshold);
+  std::sort(refitted_values.begin(), refitted_values.end());
+  b.refitted = std::move(refitted_values);
+  return b;
+}
+
 std::string detail::parameter_field(const std::string& name) {
   const auto dot = name.rfind('.');
   return dot == std::string::npos ? name : name.substr(dot + 1);
@@ -330,7 +359,8 @@ std::string ParameterBound::describe() const {
 json ParameterBound::to_json() const {
   json t = json::array();
   for (const auto& [value, change] : trials) t.push_back({value, change});
-  return {{"best", best}, {"lower", finite_or_null(lower)}, {"upper", finite_or_null(upper)}, {"trials", t}};
+  return {{"best", best}, {"lower", finite_or_null(lower)}, {"upper", finite_or_null(upper)}, {"trials", t},
+          {"refitted", refitted}};
 }
 
 }  // namespace demcal::pipelines

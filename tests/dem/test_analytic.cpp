@@ -88,7 +88,7 @@ TEST(TimeStep, CountsTheFacesInContactAsTheyComeIntoContact) {
   Scene s = block_on_base(0.2, 0.1, 0, 30);
   for (auto& v : s.blocks[1].vertices) v.y() += 0.03;
   s.solver.max_equilibrium_time = 5;
-  s.solver.time_step_faces = "in_contact";
+  ASSERT_EQ(s.solver.time_step_faces, "in_contact");  // the default
   const Recording landed = simulate(s);
   ASSERT_EQ(landed.status, RunStatus::completed) << landed.message;
   const double one_face = block_time_step(0.2, 0.1, 1, 0, 1e9, 4e8, 2000);
@@ -101,7 +101,7 @@ TEST(TimeStep, CountsTheFacesInContactAsTheyComeIntoContact) {
   const double two_faces = block_time_step(0.2, 0.1, 2, 0, 1e9, 4e8, 2000);
   EXPECT_NEAR(stacked.time_step, two_faces, 1e-12 * two_faces);
   EXPECT_NEAR(block_named(stacked, "second").displacement.y(), -0.06, 1e-4);
-  // time_step_faces "all" (the default): every face of every block from the start.
+  // time_step_faces "all": every face of every block from the start.
   s.solver.time_step_faces = "all";
   const Recording all = simulate(s);
   ASSERT_EQ(all.status, RunStatus::completed) << all.message;

@@ -135,13 +135,17 @@ TEST_F(SceneFiles, UnknownTimeStepFacesAreNamed) {
   json j = small_scene();
   j["solver"] = json::parse(R"({"time_step_faces": "some"})");
   expect_rejected(j.dump(), {"solver.time_step_faces", "all or in_contact", "'some'"});
-  // The non-default value round-trips; the default is not written (older scenes keep their hash).
-  j["solver"]["time_step_faces"] = "in_contact";
-  const Scene in_contact = scene_from_json(j, "in_contact");
-  EXPECT_EQ(in_contact.solver.time_step_faces, "in_contact");
-  EXPECT_EQ(scene_to_json(in_contact)["solver"]["time_step_faces"], "in_contact");
+  // Both values round-trip and are always written, so that a scene's hash tells them apart; a scene
+  // without the key takes the default, "in_contact".
+  j["solver"]["time_step_faces"] = "all";
+  const Scene all = scene_from_json(j, "all");
+  EXPECT_EQ(all.solver.time_step_faces, "all");
+  EXPECT_EQ(scene_to_json(all)["solver"]["time_step_faces"], "all");
   j["solver"].erase("time_step_faces");
-  EXPECT_FALSE(scene_to_json(scene_from_json(j, "default"))["solver"].contains("time_step_faces"));
+  const Scene by_default = scene_from_json(j, "default");
+  EXPECT_EQ(by_default.solver.time_step_faces, "in_contact");
+  EXPECT_EQ(scene_to_json(by_default)["solver"]["time_step_faces"], "in_contact");
+  EXPECT_NE(scene_hash(all), scene_hash(by_default));
 }
 
 TEST_F(SceneFiles, GeneratedSceneRoundTripsAndSimulates) {

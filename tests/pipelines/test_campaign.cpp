@@ -181,6 +181,46 @@ TEST(Campaign, BadInputGivesMessagesNamingTheProblem) {
   EXPECT_THROW(parse_mapping_flag("force=horizontal_force:furlong"), CampaignError);
 }
 
+// A case's "solver" lays settings over its scene's (here a generated arch), checked as a scene
+// file's would be; a name it does not know, or a bad value, is named in the message.
+TEST(Campaign, SceneSolverSettingsOverrideTheGeneratedScene) {
+  const auto dir = fresh_dir("solver");
+  const json arch = {{"generator", "arch"}, {"options", {{"contacts_per_joint", 3}}}};
+  const auto scene_of = [&](const json& solver) {
+    json spec = arch;
+    spec["solver"] = solver;
+    const json j = {{"name", "solver"},
+                    {"scene", spec},
+                    {"measured", make_measurement(dir)},
+                    {"parameters", {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+                    {"output", (dir / "out").string()}};
+    const CampaignConfig config = campaign_from_json(j, dir.string(), "solver.json");
+    return build_scene(config.cases.front().scene, "solver.json: scene");
+  };
+  const demcal::dem::Scene plain = scene_of(json::object());
+  const demcal::dem::Scene changed = scene_of({{"time_step_faces", "all"}, {"time_step_safety", 0.4}});
+  EXPECT_EQ(plain.solver.time_step_faces, "in_contact");
+  EXPECT_EQ(changed.solver.time_step_faces, "all");
+  EXPECT_EQ(changed.solver.time_step_safety, 0.4);
+  EXPECT_EQ(changed.solver.local_damping, plain.solver.local_damping);  // the others kept
+  EXPECT_EQ(changed.blocks.size(), plain.blocks.size());
+  EXPECT_NE(demcal::dem::scene_hash(changed), demcal::dem::scene_hash(plain));
+  const auto message = [&](const json& solver) {
+    try {
+      scene_of(solver);
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message({{"time_step_face", "in_contact"}}).find("scene.solver: unknown key 'time_step_face'"),
+            std::string::npos);
+  EXPECT_NE(message({{"time_step_faces", "some"}}).find("solver.time_step_faces: must be all or in_contact, got 'some'"),
+            std::string::npos);
+  EXPECT_NE(message({{"time_step_safety", 2}}).find("solver.time_step_safety"), std::string::npos);
+  EXPECT_NE(message(json::array()).find("scene.solver: expected a JSON object"), std::string::npos);
+}
+
 TEST(Campaign, MeasuredColumnsAreMappedToEngineNamesInSI) {
   const std::string file = std::string(DEMCAL_SOURCE_DIR) + "/data/walls/FD_SW301_Lourenco2005.csv";
   ASSERT_TRUE(fs::exists(file)) << "bundled data missing: " << file;

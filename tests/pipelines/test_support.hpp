@@ -1,11 +1,16 @@
 // Helpers shared by the pipelines tests: scratch folders, JSON files, the toy external simulator.
 #pragma once
 
+#include "demcal/dem/scene.hpp"
+
+#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <fstream>
+#include <ostream>
 #include <string>
+#include <vector>
 
 namespace demcal::pipelines::test_support {
 
@@ -15,6 +20,36 @@ namespace fs = std::filesystem;
 inline const std::string kToySimulator = std::string(DEMCAL_SOURCE_DIR) + "/tests/pipelines/toy_simulator.py";
 
 inline std::string python() { return fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3"; }
+
+// One realisation of the engine's round-off: the automatic time step's face rule and its safety
+// factor moved by k x 1e-14, the same physics. The CI runs the default; instances named
+// DISABLED_RoundOff count how a test on a chaotic curve fares over others (docs/diagnose.md),
+// run with --gtest_also_run_disabled_tests.
+struct Realisation {
+  std::string faces = dem::SolverSettings{}.time_step_faces;
+  int k = 0;
+  double safety() const { return dem::SolverSettings{}.time_step_safety * (1 + k * 1e-14); }
+  // the campaign scene's "solver" (docs/pipelines.md)
+  nlohmann::json solver() const { return {{"time_step_faces", faces}, {"time_step_safety", safety()}}; }
+  void apply(dem::Scene& scene) const {
+    scene.solver.time_step_faces = faces;
+    scene.solver.time_step_safety = safety();
+  }
+  std::string name() const { return faces + "_k" + (k < 0 ? "m" + std::to_string(-k) : std::to_string(k)); }
+};
+
+inline void PrintTo(const Realisation& r, std::ostream* os) { *os << r.name(); }
+
+inline std::string realisation_name(const ::testing::TestParamInfo<Realisation>& info) { return info.param.name(); }
+
+// Both face rules at k = 0, 1, -1, 2, less the default (the CI's).
+inline std::vector<Realisation> round_off_realisations() {
+  std::vector<Realisation> out;
+  for (const char* faces : {"all", "in_contact"})
+    for (int k : {0, 1, -1, 2})
+      if (!(faces == Realisation{}.faces && k == 0)) out.push_back({faces, k});
+  return out;
+}
 
 // An empty folder under the temporary directory, named after the suite and the case.
 inline fs::path fresh_dir(const std::string& suite, const std::string& name) {

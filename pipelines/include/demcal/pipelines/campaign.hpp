@@ -81,6 +81,9 @@ struct SceneSpec {
   std::string file;                    // a scene JSON file, or
   std::string generator;               // "arch" | "wall"
   nlohmann::json options = nlohmann::json::object();  // generator fields by name
+  // Solver settings laid over the scene's own (file or generator), by the scene file's names:
+  // e.g. {"time_step_faces": "in_contact"}. Empty = the scene's settings as they are.
+  nlohmann::json solver = nlohmann::json::object();
 };
 
 struct CaseSpec {

@@ -25,7 +25,8 @@
 //                    the base residual is already at the noise level; two accepted effects within
 //                    `tie_margin` of each other are "tied", and then none is chosen;
 //   6. bounds        for an accepted or tied effect, how tightly the data pin each of its
-//                    parameters (ParameterBound: the fit re-run with that parameter moved alone).
+//                    parameters (ParameterBound: the fit re-run with that parameter moved, the
+//                    others re-fitted where needed).
 //
 // Outputs: <out>/diagnosis.json (layout in docs/diagnose.md) and <out>/report.md with residual
 // plots before and after, the table of candidates and the verdict in words. Forces in N,
@@ -39,6 +40,7 @@
 
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <string>
@@ -142,14 +144,16 @@ std::vector<double> common_effective_points(const std::vector<const std::vector<
 double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
                        const std::vector<std::vector<double>>& signatures);
 
-// How tightly the data pin one effect parameter of an accepted (or tied) fit. The fit is
-// re-simulated with that parameter alone moved, the others at the best: by factors 1/10, 1/3, 3 and
-// 10 for a log-scaled parameter, by -0.3, -0.1, +0.1 and +0.3 of its search range for a linear one,
-// within the search range. A tried value is ruled out when the information criterion (as in
-// information_criterion_change, no extra parameter) rises by more than `threshold` over the best:
+// How tightly the data pin one effect parameter of an accepted (or tied) fit. The parameter is
+// moved from the best by factors 1/10, 1/3, 3 and 10 when log-scaled, by -0.3, -0.1, +0.1 and +0.3
+// of its search range when linear, within the search range. A tried value is ruled out when the
+// information criterion (as in information_criterion_change, no extra parameter) rises by more than
+// `threshold` over the best, with every other free parameter re-fitted at that value (a profile):
 // the diagnosis uses its evidence_threshold, so the data must prefer the best over a value by as
-// much as they must prefer an effect over the base model. The others are not re-fitted, so the
-// interval is conditional: the uncertainty is at least this wide.
+// much as they must prefer an effect over the base model. A value is first run with the others at
+// the best (the conditional change); only one that this rules out is re-fitted, since a re-fit can
+// only lower the change. Without the re-fit, parameters that trade off (a softer support against a
+// lower friction) would rule out values that fit as well once the others follow.
 struct ParameterBound {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
@@ -158,14 +162,24 @@ struct ParameterBound {
   double lower = kNaN;   // the ruled-out tried value nearest below the best (NaN: none below is)
   double upper = kNaN;   // the ruled-out tried value nearest above the best (NaN: none above is)
   std::vector<std::pair<double, double>> trials;   // (value, criterion change against the best), by value
+  std::vector<double> refitted;                    // tried values whose change is after re-fitting the others
   bool bounded() const { return std::isfinite(lower) && std::isfinite(upper); }
   std::string describe() const;                    // one phrase, e.g. "beam_kr 3.4e+07: not bounded above (...)"
-  nlohmann::json to_json() const;                  // {"best", "lower", "upper" (null: not bounded), "trials"}
+  nlohmann::json to_json() const;  // {"best", "lower", "upper" (null: not bounded), "trials", "refitted"}
 };
 
 // The bound from trials (value, criterion change; a NaN change = a failed run, ignored).
 ParameterBound bound_from_trials(const std::string& name, double best, std::vector<std::pair<double, double>> trials,
                                  double threshold);
+
+// The profile bound from tried `values`: `conditional(v)` is the change with the others at the
+// best, `refitted(v)` the change with them re-fitted (NaN: no re-fit, e.g. over the budget or a
+// failed run; the conditional change then stands and the value is not listed as re-fitted). On
+// each side the values the conditional change rules out are re-fitted from the nearest outward,
+// until one stays ruled out; those farther out keep their conditional change.
+ParameterBound profile_bound(const std::string& name, double best, const std::vector<double>& values,
+                             const std::function<double(double)>& conditional,
+                             const std::function<double(double)>& refitted, double threshold);
 
 // ---- the loop ----------------------------------------------------------------------------------
 
@@ -222,8 +236,11 @@ struct DiagnoseOptions {
   double held_out_tolerance = 0.1;        // share of the base fit's held-out error, >= 0
   double held_out_reproduced_ratio = 2;   // base RMS / noise at or below this: a checking channel, >= 1
   // Check how tightly the data pin each parameter of an accepted or tied effect (ParameterBound):
-  // four runs per effect parameter, within max_simulations.
+  // four runs per effect parameter, and a re-fit of the other free parameters (LN_BOBYQA from the
+  // best, at most `profile_evaluations` runs) for each tried value those runs rule out, nearest
+  // first, within max_simulations. profile_evaluations 0 = no re-fit (the conditional bound), >= 0.
   bool bound_parameters = true;
+  int profile_evaluations = 20;
   bool resume = false;                    // continue the base and candidate campaigns from their archives
   bool progress = true;                   // progress lines on stderr
   bool report = true;                     // report.md with figures
