@@ -17,7 +17,8 @@
 //                    around B, if asked) plus the effect's parameters through run_campaign
 //                    (archive, backends, surrogate, report), in <out>/candidates/<effect>/: by
 //                    Bayesian optimisation on the surrogate (default), or a local search started
-//                    from B with the effect at its probe closest to the measurement;
+//                    from B with the effect at its probe closest to the measurement (one probe
+//                    more: where the probes, taken as linear, say the residual is explained);
 //   5. selection     the change of an information criterion with the effective number of
 //                    independent points (the residual is autocorrelated; one count per channel for
 //                    every fit, common_effective_points): accepted when it falls
@@ -189,7 +190,7 @@ struct DiagnoseOptions {
   std::string base_result;                // a finished base calibration's folder (its result.json); "" = run one
   // Budget of the diagnosis's calibrations: the base (at most half, when it runs), the refinement
   // (at most a quarter of the rest) and the candidates, each cut to what is left; the signature
-  // probes (2P + 1 runs per effect and target, one per base parameter) come on top. 0 = the
+  // probes (2P + 2 runs per effect and target, one per base parameter) come on top. 0 = the
   // campaign's budget for the base and `candidate_evaluations` for each of the others.
   long max_simulations = 0;
   int max_candidates = 3;                 // effects calibrated at most, best signature first, >= 1
