@@ -7,8 +7,6 @@
 #include "demcal/pipelines/predict.hpp"
 #include "demcal/smoothing/objective.hpp"
 
-#include <Eigen/Dense>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -461,30 +459,6 @@ std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, con
           if (std::find(out.begin(), out.end(), t) == out.end() && out.size() < 4) out.push_back(t);
         }
   return out;
-}
-
-// The probe fractions that a linear model of the probes predicts to explain the residual: each
-// effect parameter's curve change taken as the difference between its strong and mild probes
-// around the mid-range one, the base parameters' sensitivities free too (least squares), clipped
-// to [0, 1]. `probes` in probe_points order, every one run; curves stacked as the residual.
-std::vector<double> linearised_fractions(const std::vector<double>& residual,
-                                         const std::vector<std::vector<double>>& sensitivities,
-                                         const std::vector<std::vector<double>>& probes, std::size_t parameters) {
-  const auto n = static_cast<Eigen::Index>(residual.size());
-  const auto p = static_cast<Eigen::Index>(parameters);
-  const auto k = static_cast<Eigen::Index>(sensitivities.size());
-  const auto column = [&](const std::vector<double>& v) { return Eigen::Map<const Eigen::VectorXd>(v.data(), n); };
-  Eigen::MatrixXd a(n, p + k);
-  for (Eigen::Index i = 0; i < p; ++i)
-    a.col(i) = (column(probes[static_cast<std::size_t>(2 * i + 2)]) - column(probes[static_cast<std::size_t>(2 * i + 1)])) /
-               (kProbeFractions[2] - kProbeFractions[0]);
-  for (Eigen::Index j = 0; j < k; ++j) a.col(p + j) = column(sensitivities[static_cast<std::size_t>(j)]);
-  const Eigen::VectorXd target = column(residual) - column(probes.front());
-  if (!a.allFinite() || !target.allFinite()) return {};
-  const Eigen::VectorXd step = a.completeOrthogonalDecomposition().solve(target);
-  std::vector<double> t;
-  for (Eigen::Index i = 0; i < p; ++i) t.push_back(std::clamp(0.5 + step[i], 0.0, 1.0));
-  return t;
 }
 
 // ---- stage 4: extended calibration ------------------------------------------------------------
@@ -1068,7 +1042,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         // one more run where the probes, taken as linear, say the residual is explained: the
         // search's start when it fits better than every probe
         if (signatures.size() == points.size()) {
-          const auto t = linearised_fractions(residual, sensitivities, signatures, m.parameter_names.size());
+          const auto t = linearised_fractions(residual, sensitivities, signatures, m.parameter_names.size(),
+                                              kProbeFractions[0], kProbeFractions[2]);
           if (!t.empty()) probe_at(t);
         }
         if (!signatures.empty()) c.signature_score = signature_score(residual, sensitivities, signatures);

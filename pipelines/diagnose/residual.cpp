@@ -280,6 +280,31 @@ double signature_score(const std::vector<double>& residual, const std::vector<st
   return std::clamp(1 - best / without, 0.0, 1.0);
 }
 
+std::vector<double> linearised_fractions(const std::vector<double>& residual,
+                                         const std::vector<std::vector<double>>& base_sensitivities,
+                                         const std::vector<std::vector<double>>& probes, std::size_t parameters,
+                                         double strong, double mild) {
+  const auto n = static_cast<Eigen::Index>(residual.size());
+  const auto p = static_cast<Eigen::Index>(parameters);
+  const auto k = static_cast<Eigen::Index>(base_sensitivities.size());
+  if (probes.size() != 2 * parameters + 1 || !(mild != strong)) return {};
+  for (const auto* columns : {&probes, &base_sensitivities})
+    for (const auto& c : *columns)
+      if (static_cast<Eigen::Index>(c.size()) != n) return {};
+  const auto column = [&](const std::vector<double>& v) { return Eigen::Map<const Eigen::VectorXd>(v.data(), n); };
+  Eigen::MatrixXd a(n, p + k);
+  for (Eigen::Index i = 0; i < p; ++i)
+    a.col(i) = (column(probes[static_cast<std::size_t>(2 * i + 2)]) - column(probes[static_cast<std::size_t>(2 * i + 1)])) /
+               (mild - strong);
+  for (Eigen::Index j = 0; j < k; ++j) a.col(p + j) = column(base_sensitivities[static_cast<std::size_t>(j)]);
+  const Eigen::VectorXd target = column(residual) - column(probes.front());
+  if (!a.allFinite() || !target.allFinite()) return {};
+  const Eigen::VectorXd step = a.completeOrthogonalDecomposition().solve(target);
+  std::vector<double> t;
+  for (Eigen::Index i = 0; i < p; ++i) t.push_back(std::clamp(0.5 + step[i], 0.0, 1.0));
+  return t;
+}
+
 ParameterBound bound_from_trials(const std::string& name, double best, std::vector<std::pair<double, double>> trials,
                                  double threshold) {
   ParameterBound b;

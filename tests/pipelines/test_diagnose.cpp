@@ -172,6 +172,33 @@ TEST(Evidence, SignatureScoreNeedsTheRightShapeAndSign) {
   EXPECT_EQ(signature_score(j1, {j1}, {s}), 0.0);       // nothing left for the effect to explain
 }
 
+// Curves that are linear in the probe fractions: the point the probes predict is the one that
+// made the residual, the base parameters' part taken out; a step beyond the range is clipped.
+TEST(Evidence, LinearisedProbesPointWhereTheResidualIsExplained) {
+  std::mt19937_64 rng(11);
+  const auto random_curve = [&] {
+    std::vector<double> v(60);
+    for (double& x : v) x = normal(rng);
+    return v;
+  };
+  const std::vector<double> mid = random_curve(), d0 = random_curve(), d1 = random_curve(), j = random_curve();
+  const auto curve_at = [&](double t0, double t1, double base) {
+    std::vector<double> v(mid.size());
+    for (std::size_t i = 0; i < v.size(); ++i) v[i] = mid[i] + d0[i] * (t0 - 0.5) + d1[i] * (t1 - 0.5) + base * j[i];
+    return v;
+  };
+  const std::vector<std::vector<double>> probes = {curve_at(0.5, 0.5, 0), curve_at(0.2, 0.5, 0), curve_at(0.8, 0.5, 0),
+                                                   curve_at(0.5, 0.2, 0), curve_at(0.5, 0.8, 0)};
+  std::vector<double> t = linearised_fractions(curve_at(0.65, 0.3, 0.7), {j}, probes, 2, 0.2, 0.8);
+  ASSERT_EQ(t.size(), 2u);
+  EXPECT_NEAR(t[0], 0.65, 1e-9);
+  EXPECT_NEAR(t[1], 0.3, 1e-9);
+  t = linearised_fractions(curve_at(1.4, 0.5, 0), {j}, probes, 2, 0.2, 0.8);
+  EXPECT_EQ(t[0], 1.0);
+  EXPECT_NEAR(t[1], 0.5, 1e-9);
+  EXPECT_TRUE(linearised_fractions(mid, {j}, {probes.begin(), probes.end() - 1}, 2, 0.2, 0.8).empty());  // a probe missing
+}
+
 TEST(Evidence, HeldOutDataVetoesAFitThatSpoilsIt) {
   DiagnoseOptions o;  // tolerance: 10 % of the base error, or the noise when larger
   Diagnosis d;

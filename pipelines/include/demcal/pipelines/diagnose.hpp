@@ -145,6 +145,19 @@ std::vector<double> common_effective_points(const std::vector<const std::vector<
 double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
                        const std::vector<std::vector<double>>& signatures);
 
+// Where the signature probes, taken as linear, say the residual is explained: the fractions of
+// each effect parameter's search range (clipped to [0, 1]). `probes` are the curve changes of the
+// probe runs in probe order (every parameter at mid-range, then parameter i at fraction `strong`
+// and at `mild` with the others at mid-range, i = 0..parameters-1), stacked like `residual`; each
+// parameter's change is the difference of its two probes over their fractions' distance, and the
+// base parameters' sensitivities are free in the least-squares fit too. Empty when a probe is
+// missing or a column differs in length. The diagnosis runs this point as one probe more, a start
+// for the candidate's search when it fits better than every probe.
+std::vector<double> linearised_fractions(const std::vector<double>& residual,
+                                         const std::vector<std::vector<double>>& base_sensitivities,
+                                         const std::vector<std::vector<double>>& probes, std::size_t parameters,
+                                         double strong, double mild);
+
 // How tightly the data pin one effect parameter of an accepted (or tied) fit. The parameter is
 // moved from the best by factors 1/10, 1/3, 3 and 10 when log-scaled, by -0.3, -0.1, +0.1 and +0.3
 // of its search range when linear, within the search range. A tried value is ruled out when the
