@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <sstream>
 
@@ -591,13 +592,13 @@ std::vector<double> bound_trial_values(const dem::EffectParameter& p, double bes
   return values;
 }
 
+// The criterion change of a parameter set against a fit (NaN: a failed run).
+using ChangeAt = std::function<double(const std::map<std::string, double>&)>;
+
 // The other free parameters of `m` re-fitted with `name` held at `value` (LN_BOBYQA from `best`,
-// at most profile_evaluations runs): the smallest criterion change against candidate c's fit,
-// NaN when nothing else is free or every run failed.
-double refitted_change(const EffectCandidate& c, const ExtendedModel& m, const CampaignConfig& fitted,
-                       const std::map<std::string, double>& best, const std::string& name, double value,
-                       const std::vector<ChannelResidual>& grid, const std::vector<double>& effective_points,
-                       CaseRunner& runner, const DiagnoseOptions& options) {
+// at most `evaluations` runs): the smallest change, NaN when nothing else is free or every run failed.
+double refitted_change(const ExtendedModel& m, const std::map<std::string, double>& best, const std::string& name,
+                       double value, const ChangeAt& change_at, int evaluations) {
   const optimise::ParameterSpace& full = m.config.space;
   optimise::ParameterSpace others;
   for (const auto& spec : full.free_parameters())
@@ -611,13 +612,13 @@ double refitted_change(const EffectCandidate& c, const ExtendedModel& m, const C
   const Eigen::VectorXd lower = others.lower_bounds(), upper = others.upper_bounds();
   for (int i = 0; i < others.dimension(); ++i) start[i] = std::clamp(best.at(names[i]), lower[i], upper[i]);
   optimise::PolishOptions polish;
-  polish.max_evaluations = options.profile_evaluations;
+  polish.max_evaluations = evaluations;
   const auto optimiser = optimise::make_polisher(others, start, polish);
   const auto summary = optimise::minimise(*optimiser, [&](const Eigen::VectorXd& x) {
     std::map<std::string, double> params = best;
     for (const auto& [key, v] : others.values(x)) params[key] = v;
-    const Evaluation e = runner.evaluate(fitted, params, &grid);
-    return e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : HUGE_VAL;
+    const double change = change_at(params);
+    return std::isnan(change) ? HUGE_VAL : change;
   });
   return std::isfinite(summary.best_value) ? summary.best_value : Diagnosis::kNaN;
 }
@@ -633,6 +634,10 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
   const auto within_budget = [&](long runs) {
     return options.max_simulations <= 0 || runner.simulations() + runs_per_trial * runs <= options.max_simulations;
   };
+  const ChangeAt change_at = [&](const std::map<std::string, double>& params) {
+    const Evaluation e = runner.evaluate(fitted, params, &grid);
+    return e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : Diagnosis::kNaN;
+  };
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
     const std::string& name = m.parameter_names[i];
     if (!best.count(name)) continue;
@@ -641,12 +646,11 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
     const auto conditional = [&](double v) {
       std::map<std::string, double> params = best;
       params[name] = v;
-      const Evaluation e = runner.evaluate(fitted, params, &grid);
-      return e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : Diagnosis::kNaN;
+      return change_at(params);
     };
     const auto refitted = [&](double v) {
       if (options.profile_evaluations == 0 || !within_budget(options.profile_evaluations)) return Diagnosis::kNaN;
-      return refitted_change(c, m, fitted, best, name, v, grid, effective_points, runner, options);
+      return refitted_change(m, best, name, v, change_at, options.profile_evaluations);
     };
     c.bounds.push_back(profile_bound(name, best.at(name), values, conditional, refitted, options.evidence_threshold));
   }
