@@ -5,15 +5,18 @@
 #   3. the worth test: SW.30.1 + SW.100.1 calibrated together, then SW.200.1 and SW.250.1 predicted;
 #   4. the fidelity check of the fast run settings: the calibrated SW.30.1 and SW.250.1 runs repeated
 #      at 2 mm/s with 15 contact points per joint;
-#   5. the tables of docs/walls.md rewritten between their <!-- walls:NAME --> markers.
+#   5. the faithful calibrations: steps 2 and 3 again with every case at 2 mm/s and 15 contact points
+#      per joint (demo-out/walls/faithful/), about ten times the simulation cost;
+#   6. the tables of docs/walls.md rewritten between their <!-- walls:NAME --> markers.
 # Every campaign keeps its archive (demo-out/walls/<name>/archive.sqlite), so a second run of this
 # script re-simulates nothing and only rebuilds the tables.
 #
-# Usage: scripts/walls.sh [BUILD_DIR] [STEP...]   (steps: trial walls worth fidelity tables; default all)
+# Usage: scripts/walls.sh [BUILD_DIR] [STEP...]
+#   (steps: trial walls worth fidelity faithful tables; default all)
 set -euo pipefail
 build=${1:-build}
 shift || true
-steps=${*:-trial walls worth fidelity tables}
+steps=${*:-trial walls worth fidelity faithful tables}
 demcal="$build/demcal"
 out=demo-out/walls
 data=data/walls
@@ -21,11 +24,29 @@ mkdir -p "$out"
 has_step() { [[ " $steps " == *" $1 "* ]]; }
 
 # Calibrate one campaign file, then simulate its cases with the best set (the calibrated curves).
+# calibrate NAME [FOLDER]: data/walls/NAME.json, or FOLDER/NAME.json with its outputs in FOLDER/NAME.
 calibrate() {
-  local name=$1
-  echo "== $name"
-  "$demcal" calibrate "$data/$name.json" --out "$out/$name"
-  "$demcal" predict "$data/$name.json" --result "$out/$name/result.json" --out "$out/$name/fit"
+  local name=$1 dir=${2:-}
+  local file="${dir:-$data}/$name.json" target="${dir:-$out}/$name"
+  echo "== $name${dir:+ ($dir)}"
+  "$demcal" calibrate "$file" --out "$target"
+  "$demcal" predict "$file" --result "$target/result.json" --out "$target/fit"
+}
+
+# faithful_copy SOURCE TARGET: the campaign file with every case at the faithful settings (2 mm/s,
+# 15 contact points per joint) and its measured files named by absolute path.
+faithful_copy() {
+  python3 - "$1" "$2" <<'PY'
+import json, os, sys
+source, target = sys.argv[1], sys.argv[2]
+c = json.load(open(source))
+for case in c["cases"]:
+    case["scene"]["options"].update({"velocity": 0.002, "contacts_per_joint": 15})
+    case["measured"]["file"] = os.path.abspath(os.path.join(os.path.dirname(source), case["measured"]["file"]))
+c["name"] += "-faithful"
+c.pop("output", None)
+json.dump(c, open(target, "w"), indent=2)
+PY
 }
 
 if has_step trial; then
@@ -49,21 +70,26 @@ if has_step fidelity; then
   # The same campaign cases with the slow, faithful settings: 2 mm/s, 15 contact points per joint.
   mkdir -p "$out/fidelity"
   for wall in SW.30.1 SW.250.1; do
-    python3 - "$data/$wall.json" "$out/fidelity/$wall-slow.json" <<'PY'
-import json, os, sys
-source, target = sys.argv[1], sys.argv[2]
-c = json.load(open(source))
-for case in c["cases"]:
-    case["scene"]["options"].update({"velocity": 0.002, "contacts_per_joint": 15})
-    case["measured"]["file"] = os.path.abspath(os.path.join(os.path.dirname(source), case["measured"]["file"]))
-c["name"] += "-slow"
-json.dump(c, open(target, "w"), indent=2)
-PY
+    faithful_copy "$data/$wall.json" "$out/fidelity/$wall-slow.json"
     echo "== fidelity: $wall at 2 mm/s, 15 contact points"
     "$demcal" predict "$out/fidelity/$wall-slow.json" --result "$out/$wall/result.json" --out "$out/fidelity/$wall-slow"
     "$demcal" fitness --objective 1 -e "$out/fidelity/$wall-slow/$wall.csv" -s "$out/$wall/fit/$wall.csv" \
       > "$out/fidelity/$wall-fast-vs-slow.json"
   done
+fi
+
+if has_step faithful; then
+  faithful=$out/faithful
+  mkdir -p "$faithful"
+  for name in SW.30.1 SW.30.2 SW.100.1 SW.100.2 SW.200.1 SW.200.2 SW.250.1 worth-SW30-SW100 predict-SW200-SW250; do
+    faithful_copy "$data/$name.json" "$faithful/$name.json"
+  done
+  for name in SW.30.1 SW.30.2 SW.100.1 SW.100.2 SW.200.1 SW.200.2 SW.250.1 worth-SW30-SW100; do
+    calibrate "$name" "$faithful"
+  done
+  echo "== prediction of SW.200.1 and SW.250.1 with the faithful SW.30.1 + SW.100.1 parameters"
+  "$demcal" predict "$faithful/predict-SW200-SW250.json" --result "$faithful/worth-SW30-SW100/result.json" \
+    --out "$faithful/worth-SW30-SW100/predict"
 fi
 
 if has_step tables; then
@@ -149,19 +175,22 @@ for label, name in [("9 courses, top beam held level", "SW.30.1"), ("9 courses, 
     lines.append(row([label] + param_cells(r) + [kN(r["best"]["fitness"])] + case_cells(f["cases"][0])))
 tables["boundary"] = lines
 
-head = ["test", "role", "peak measured (kN)", "peak simulated (kN)", "peak error", "RMS error (kN)", "RMS / peak",
-        "RMS of its own calibration (kN)", "peak at, measured / simulated (mm)",
-        "mean residual before / after the measured peak (kN)"]
-codes = {"SW.30.1": "SW301", "SW.100.1": "SW1001", "SW.200.1": "SW2001", "SW.250.1": "SW2501"}
-lines = [row(head), row(["---"] * len(head))]
-r = load(f"{out}/worth-SW30-SW100/result.json")
-fit, pred = load(f"{out}/worth-SW30-SW100/fit/prediction.json"), load(f"{out}/worth-SW30-SW100/predict/prediction.json")
-if r and fit and pred:
-    for role, doc_cases, folder in [("calibrated on", fit["cases"], "fit"), ("predicted", pred["cases"], "predict")]:
+def worth_table(folder):
+    """The worth test of one set of campaigns (the fast ones in out, the faithful ones in out/faithful)."""
+    head = ["test", "role", "peak measured (kN)", "peak simulated (kN)", "peak error", "RMS error (kN)", "RMS / peak",
+            "RMS of its own calibration (kN)", "peak at, measured / simulated (mm)",
+            "mean residual before / after the measured peak (kN)"]
+    codes = {"SW.30.1": "SW301", "SW.100.1": "SW1001", "SW.200.1": "SW2001", "SW.250.1": "SW2501"}
+    lines = [row(head), row(["---"] * len(head))]
+    r = load(f"{folder}/worth-SW30-SW100/result.json")
+    fit, pred = load(f"{folder}/worth-SW30-SW100/fit/prediction.json"), load(f"{folder}/worth-SW30-SW100/predict/prediction.json")
+    if not (r and fit and pred):
+        return lines + [row(["not run"] + [""] * (len(head) - 1))]
+    for role, doc_cases, sub in [("calibrated on", fit["cases"], "fit"), ("predicted", pred["cases"], "predict")]:
         for c in doc_cases:
             before, after = residual_split(f"data/walls/FD_{codes[c['name']]}_Lourenco2005.csv",
-                                           f"{out}/worth-SW30-SW100/{folder}/{c['name']}.csv")
-            own = load(f"{out}/{c['name']}/fit/prediction.json")
+                                           f"{folder}/worth-SW30-SW100/{sub}/{c['name']}.csv")
+            own = load(f"{folder}/{c['name']}/fit/prediction.json")
             own_rms = f"{own['cases'][0]['rms_error'] / 1e3:.2f}" if own and own["cases"][0]["rms_error"] is not None else "–"
             lines.append(row([c["name"], role] + case_cells(c) + [own_rms, f"{c['measured_peak_displacement'] * 1e3:.1f} / {c['simulated_peak_displacement'] * 1e3:.1f}",
                                                             f"{before / 1e3:+.1f} / {after / 1e3:+.1f}"]))
@@ -170,9 +199,23 @@ if r and fit and pred:
     lines.append(f"Joint set calibrated on SW.30.1 + SW.100.1: kn = {p['kn'] / 1e9:.3g} GPa/m, "
                  f"ks = {p['ks'] / 1e9:.3g} GPa/m, φ = {p['friction_deg']:.1f}°; objective 1 (sum of both cases) "
                  f"= {r['best']['fitness'] / 1e3:.1f} kN after {r['simulations']} simulations ({r['wall_time_s']:.0f} s).")
-else:
-    lines.append(row(["not run"] + [""] * (len(head) - 1)))
-tables["worth"] = lines
+    return lines
+
+tables["worth"] = worth_table(out)
+tables["worth-faithful"] = worth_table(f"{out}/faithful")
+
+# Each wall calibrated at the fast and at the faithful settings: what the fast settings change in
+# the calibrated parameters and errors, and what the faithful ones cost.
+head = ["test", "settings", "kn (GPa/m)", "ks (GPa/m)", "φ (°)", "peak measured (kN)", "peak calibrated (kN)",
+        "peak error", "RMS error (kN)", "RMS / peak", "simulations", "wall time (s)"]
+lines = [row(head), row(["---"] * len(head))]
+for w in walls:
+    for label, folder in [("fast", out), ("faithful", f"{out}/faithful")]:
+        r, f = load(f"{folder}/{w}/result.json"), load(f"{folder}/{w}/fit/prediction.json")
+        if not r or not f: lines.append(row([w, label, "not run"] + [""] * (len(head) - 3))); continue
+        lines.append(row([w, label] + param_cells(r) + case_cells(f["cases"][0])
+                         + [str(r["simulations"]), f"{r['wall_time_s']:.0f}"]))
+tables["faithful"] = lines
 
 head = ["test", "settings", "peak (kN)", "peak change", "RMS difference fast vs slow (kN)", "steps", "run wall time (s)"]
 lines = [row(head), row(["---"] * len(head))]
