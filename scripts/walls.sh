@@ -9,7 +9,7 @@
 #      per joint (demo-out/walls/faithful/), about ten times the simulation cost;
 #   6. the tables of docs/walls.md rewritten between their <!-- walls:NAME --> markers.
 # Every campaign keeps its archive (demo-out/walls/<name>/archive.sqlite), so a second run of this
-# script re-simulates nothing and only rebuilds the tables.
+# script re-simulates nothing and rebuilds the tables (whose wall times are then those of the rerun).
 #
 # Usage: scripts/walls.sh [BUILD_DIR] [STEP...]
 #   (steps: trial walls worth fidelity faithful tables; default all)
@@ -81,12 +81,9 @@ fi
 if has_step faithful; then
   faithful=$out/faithful
   mkdir -p "$faithful"
-  for name in SW.30.1 SW.30.2 SW.100.1 SW.100.2 SW.200.1 SW.200.2 SW.250.1 worth-SW30-SW100 predict-SW200-SW250; do
-    faithful_copy "$data/$name.json" "$faithful/$name.json"
-  done
-  for name in SW.30.1 SW.30.2 SW.100.1 SW.100.2 SW.200.1 SW.200.2 SW.250.1 worth-SW30-SW100; do
-    calibrate "$name" "$faithful"
-  done
+  campaigns="SW.30.1 SW.30.2 SW.100.1 SW.100.2 SW.200.1 SW.200.2 SW.250.1 worth-SW30-SW100"
+  for name in $campaigns predict-SW200-SW250; do faithful_copy "$data/$name.json" "$faithful/$name.json"; done
+  for name in $campaigns; do calibrate "$name" "$faithful"; done
   echo "== prediction of SW.200.1 and SW.250.1 with the faithful SW.30.1 + SW.100.1 parameters"
   "$demcal" predict "$faithful/predict-SW200-SW250.json" --result "$faithful/worth-SW30-SW100/result.json" \
     --out "$faithful/worth-SW30-SW100/predict"
