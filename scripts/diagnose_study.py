@@ -74,7 +74,7 @@ def campaign(measured, args):
         "name": "diagnose-study",
         "scene": {"generator": "arch", "options": scene_options},
         "measured": measured,
-        "parameters": [{"name": "kn", "lower": 1e8, "upper": 1e10, "scale": "log10"},
+        "parameters": [{"name": "kn", "lower": 1e8, "upper": args.kn_upper, "scale": "log10"},
                        {"name": "ks", "lower": 1e8, "upper": 1e10, "scale": "log10"},
                        {"name": "friction_deg", "lower": 25, "upper": 45}],
         # by default the abutment gauge is not fitted (docs/diagnose.md): it is the check on data not
@@ -171,6 +171,8 @@ def main():
                    help="one simulated row in N kept as a measured row (1: the simulation's own sampling)")
     p.add_argument("--match-sampling", action="store_true",
                    help="the campaign's simulation recorded at the measurement's rate (record_interval)")
+    p.add_argument("--kn-upper", type=float, default=1e10,
+                   help="top of the campaign's kn range (Pa/m; the base fit of stiffening joints presses against it)")
     p.add_argument("--jobs", type=int, default=1)
     args = p.parse_args()
     if not args.magnitude > 0:

@@ -69,6 +69,9 @@ void setup(CLI::App& app) {
   sub->add_option("--evidence", o.evidence_threshold, "Criterion fall needed to accept an effect")->capture_default_str();
   sub->add_option("--scatter-runs", o.scatter_runs,
                   "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)")->capture_default_str();
+  sub->add_option("--scatter-floor-ratio", o.scatter_floor_ratio,
+                  "The scatter counts in the error floor up to this x the noise (inf = all of it)")
+      ->capture_default_str();
   sub->add_flag("--resume", o.resume, "Continue interrupted calibrations from their archives");
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");
   sub->add_flag("--no-parameter-bounds", flags->no_bounds,

@@ -37,6 +37,7 @@ void DiagnoseOptions::Validate() const {
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
   if (profile_evaluations < 0) fail("profile_evaluations", std::to_string(profile_evaluations), "must be >= 0");
   if (scatter_runs < 0) fail("scatter_runs", std::to_string(scatter_runs), "must be >= 0");
+  if (!(scatter_floor_ratio > 0)) fail("scatter_floor_ratio", std::to_string(scatter_floor_ratio), "must be > 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
   if (!(held_out_tolerance >= 0)) fail("held_out_tolerance", std::to_string(held_out_tolerance), "must be >= 0");
   if (!(held_out_reproduced_ratio >= 1))
@@ -786,7 +787,7 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
     d.chosen.clear();
     d.error_after = d.error_before;
     const double scatter = overall(d.scatter);
-    const double floor = std::hypot(noise, std::isfinite(scatter) ? scatter : 0.0);
+    const double floor = error_floor(noise, scatter, options);
     const std::string errors = "RMS force error " + format_number(d.error_before) + " N, noise about " +
                                format_number(noise) + " N, simulation scatter about " + format_number(scatter) + " N";
     const EffectCandidate* closest = nullptr;
@@ -807,6 +808,11 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   }
 }
 
+double error_floor(double noise, double scatter, const DiagnoseOptions& options) {
+  if (!std::isfinite(scatter)) return noise;
+  return std::hypot(noise, std::min(scatter, options.scatter_floor_ratio * noise));
+}
+
 ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeries& simulated) {
   ChannelResidual r = base;
   const auto envelope = smoothing::loading_envelope(simulated);
@@ -815,6 +821,37 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   complete_residual(r);
   detail::note_simulated_sampling(r, simulated, envelope);
   return r;
+}
+
+std::string split_response_note(const Diagnosis& d, const DiagnoseOptions& options) {
+  const double noise = overall_noise(d.base_residuals), scatter = overall(d.scatter);
+  if (!(scatter > options.scatter_floor_ratio * noise)) return "";
+  std::string rerun_errors;
+  for (const double e : d.base_rerun_errors) rerun_errors += (rerun_errors.empty() ? "" : ", ") + format_number(e);
+  return " The base fit sits where the model's response splits: its re-runs, parameters moved by 1e-7, score " +
+         rerun_errors + " N and scatter by " + format_number(scatter) + " N, " + format_number(scatter / noise, 2) +
+         " x the noise; that scatter is the point's, not the model's, and the floor counts it up to " +
+         format_number(options.scatter_floor_ratio, 2) + " x the noise.";
+}
+
+std::string base_at_bound_note(const Diagnosis& d, const optimise::ParameterSpace& space) {
+  std::string listed;
+  const auto& free = space.free_parameters();
+  for (std::size_t j = 0; j < free.size(); ++j) {
+    const auto found = d.base_params.find(free[j].name);
+    if (found == d.base_params.end()) continue;
+    Eigen::VectorXd physical = (space.lower_bounds() + space.upper_bounds()) / 2;
+    physical(static_cast<Eigen::Index>(j)) = found->second;
+    const double u = space.to_unit(physical)(static_cast<Eigen::Index>(j));
+    if (u > kAtBound && u < 1 - kAtBound) continue;
+    listed += (listed.empty() ? "" : "; ") + free[j].name + " " + format_number(found->second) + " at the " +
+              (u <= kAtBound ? "lower" : "upper") + " end of [" + format_number(free[j].lower) + ", " +
+              format_number(free[j].upper) + "]";
+  }
+  if (listed.empty()) return "";
+  return " The base fit presses against its calibration range (" + listed +
+         "): the data ask for more than the range allows, because the range is too narrow or because the parameter "
+         "stands in for something the base model lacks; a calibration over a wider range tells the two apart.";
 }
 
 std::string narrow_window_note(const Diagnosis& d) {
@@ -984,8 +1021,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     for (const auto& n : options.effects) effects.push_back(&dem::find_effect(n));
   }
 
-  const double error_floor = std::hypot(noise, std::isfinite(scatter) ? scatter : 0.0);  // what no model can remove
-  const bool at_noise = d.error_before <= options.noise_level_ratio * error_floor;
+  const bool at_noise = d.error_before <= options.noise_level_ratio * error_floor(noise, scatter, options);
   std::map<std::string, ExtendedModel> models;                   // effect -> its best-signature extension
   std::map<std::string, std::map<std::string, double>> best_sets;  // effect -> its fit's complete parameter set
   if (at_noise) {
@@ -1151,7 +1187,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       }
     }
   }
-  d.verdict += narrow_window_note(d) + sparse_measurement_note(d);
+  d.verdict += split_response_note(d, options) + base_at_bound_note(d, config.space) + narrow_window_note(d) +
+               sparse_measurement_note(d);
   d.simulations = runner.simulations();
   d.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   {

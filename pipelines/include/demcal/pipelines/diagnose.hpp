@@ -218,6 +218,12 @@ struct DiagnoseOptions {
   // of median error among the best set's and these, so that one lucky run does not decide. 0 =
   // neither, >= 0.
   int scatter_runs = 2;
+  // The scatter counts in the floor (error_floor) up to this x the measurement noise, > 0
+  // (infinity: all of it). A base fit whose re-runs scatter by more than the noise sits where the
+  // model's response splits (a joint stiffness at its bound, a hinge about to form): that scatter is
+  // the point's, not the model's, since the truth itself reproduces the measurement to about its
+  // noise (docs/diagnose.md, step 2). Counted in full, it would excuse any misfit there.
+  double scatter_floor_ratio = 1;
   // Base parameters in each candidate calibration: log-scaled ones within best x/÷ narrow_log_factor
   // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range, then clipped to
   // the campaign's bounds. Both 0 (the default): the campaign's own bounds, since base parameters
@@ -354,6 +360,18 @@ std::string unfitted_data_note(const Diagnosis& diagnosis);
 constexpr double kNarrowWindow = 0.5;
 std::string narrow_window_note(const Diagnosis& diagnosis);
 
+// A sentence for the verdict when the base fit's re-runs scatter by more than
+// options.scatter_floor_ratio x the noise: the fit sits where the model's response splits, and the
+// floor counted that scatter only up to the cap (error_floor). "" otherwise.
+std::string split_response_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// A sentence for the verdict naming the base fit's free parameters within kAtBound (a share of the
+// unit cube) of a bound of their calibration range: the data ask for more than the range allows,
+// because the range is too narrow or because the parameter stands in for something the base model
+// lacks (stiff linear joints for joints that stiffen as they close). "" when there are none.
+constexpr double kAtBound = 0.01;
+std::string base_at_bound_note(const Diagnosis& diagnosis, const optimise::ParameterSpace& space);
+
 // A sentence for the verdict on the fitted channels whose measurement leaves a gap wider than
 // `kSparseGap` of the compared range in which the base fit or a candidate's fit, recorded more
 // densely than the measurement (more than `kDenserRecord` x its rows), has at least `kShapeInGap`
@@ -377,6 +395,11 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 // (the model lacks something the candidates do not supply; the closest is named).
 constexpr double kUnexplainedRatio = 2;
 void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// What no model can remove (N): the hypotenuse of the measurement noise and the simulation's own
+// scatter, the scatter counted up to options.scatter_floor_ratio x the noise (a NaN scatter: none).
+// Step 2's "nothing to explain" test and step 5's "No effect found" both measure against it.
+double error_floor(double noise, double scatter, const DiagnoseOptions& options);
 
 // Runs the loop on a campaign (the same file `demcal calibrate` takes). Throws CampaignError for
 // bad input found before the first simulation; failed candidate calibrations become "rejected"
