@@ -220,9 +220,10 @@ struct DiagnoseOptions {
   int scatter_runs = 2;
   // The scatter counts in the floor (error_floor) up to this x the measurement noise, > 0
   // (infinity: all of it). A base fit whose re-runs scatter by more than the noise sits where the
-  // model's response splits (a joint stiffness at its bound, a hinge about to form): that scatter is
-  // the point's, not the model's, since the truth itself reproduces the measurement to about its
-  // noise (docs/diagnose.md, step 2). Counted in full, it would excuse any misfit there.
+  // model's response splits (measured: linear joints fitted to joints that stiffen as they close,
+  // kn at the top of its range): that scatter is the point's, not the model's, since the truth
+  // itself reproduces the measurement to about its noise (docs/diagnose.md, step 2). Counted in
+  // full, it would excuse any misfit there.
   double scatter_floor_ratio = 1;
   // Base parameters in each candidate calibration: log-scaled ones within best x/÷ narrow_log_factor
   // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range, then clipped to
