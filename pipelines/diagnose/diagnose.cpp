@@ -835,17 +835,18 @@ std::string split_response_note(const Diagnosis& d, const DiagnoseOptions& optio
 }
 
 std::string base_at_bound_note(const Diagnosis& d, const optimise::ParameterSpace& space) {
-  std::string listed;
   const auto& free = space.free_parameters();
+  Eigen::VectorXd physical = (space.lower_bounds() + space.upper_bounds()) / 2;  // a missing one: mid-range
+  for (std::size_t j = 0; j < free.size(); ++j)
+    if (const auto found = d.base_params.find(free[j].name); found != d.base_params.end())
+      physical(static_cast<Eigen::Index>(j)) = found->second;
+  const Eigen::VectorXd unit = space.to_unit(physical);
+  std::string listed;
   for (std::size_t j = 0; j < free.size(); ++j) {
-    const auto found = d.base_params.find(free[j].name);
-    if (found == d.base_params.end()) continue;
-    Eigen::VectorXd physical = (space.lower_bounds() + space.upper_bounds()) / 2;
-    physical(static_cast<Eigen::Index>(j)) = found->second;
-    const double u = space.to_unit(physical)(static_cast<Eigen::Index>(j));
+    const double u = unit(static_cast<Eigen::Index>(j));
     if (u > kAtBound && u < 1 - kAtBound) continue;
-    listed += (listed.empty() ? "" : "; ") + free[j].name + " " + format_number(found->second) + " at the " +
-              (u <= kAtBound ? "lower" : "upper") + " end of [" + format_number(free[j].lower) + ", " +
+    listed += (listed.empty() ? "" : "; ") + free[j].name + " " + format_number(physical(static_cast<Eigen::Index>(j))) +
+              " at the " + (u <= kAtBound ? "lower" : "upper") + " end of [" + format_number(free[j].lower) + ", " +
               format_number(free[j].upper) + "]";
   }
   if (listed.empty()) return "";
