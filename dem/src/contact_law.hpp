@@ -21,7 +21,10 @@ struct NodeKinematics {
 struct NodeForces {
   double normal = 0;         // N, compression positive
   double shear = 0;          // N along the contact tangent, acting on the second block
-  double plastic_slip = 0;   // m of sliding in this step (0 while sticking)
+  // N by which the trial shear exceeded the limit (0 while sticking): the node slid excess / (ks A)
+  // in this step. Callers that weight slip by tributary length sum it and divide once, by ks times
+  // the joint's width, instead of one division per sliding node.
+  double excess_shear = 0;
 };
 
 // Mohr-Coulomb, no cohesion, no tension: Fn = kn A pen; Fs incremental with ks A, capped at Fn tan(phi).
@@ -30,6 +33,8 @@ class MohrCoulombLaw {
  public:
   explicit MohrCoulombLaw(const JointMaterial& m)
       : kn_(m.normal_stiffness), ks_(m.shear_stiffness), tan_phi_(std::tan(m.friction_angle)) {}
+
+  double shear_stiffness() const { return ks_; }
 
   NodeForces evaluate(const NodeKinematics& k, double& shear_state) const {
     NodeForces f;
@@ -42,7 +47,7 @@ class MohrCoulombLaw {
     const double limit = tan_phi_ * f.normal;
     if (std::abs(trial) > limit) {
       f.shear = std::copysign(limit, trial);
-      f.plastic_slip = (std::abs(trial) - limit) / (ks_ * k.area);
+      f.excess_shear = std::abs(trial) - limit;
     } else {
       f.shear = trial;
     }
@@ -140,8 +145,8 @@ class EffectLaw {
     }
     if (std::abs(trial) > limit) {
       f.shear = std::copysign(limit, trial);
-      f.plastic_slip = (std::abs(trial) - limit) / ks_area;
-      h.slip += f.plastic_slip;
+      f.excess_shear = std::abs(trial) - limit;
+      h.slip += f.excess_shear / ks_area;
     } else {
       f.shear = trial;
     }

@@ -707,7 +707,7 @@ void Engine::process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCo
   const double i0 = (b.velocity_at(p0) - a.velocity_at(p0)).dot(t) * dt_;
   const double di = ((b.angular_velocity - a.angular_velocity) * perp(dp)).dot(t) * dt_;
   const double inner_area = span.spacing * scene_.width;
-  double fn_sum = 0, fs_sum = 0, fn_first_moment = 0, fs_first_moment = 0, slip_weighted = 0, length_total = 0;
+  double fn_sum = 0, fs_sum = 0, fn_first_moment = 0, fs_first_moment = 0, excess_sum = 0, length_total = 0;
   bool touching = false;
   for (int k = 0; k < count; ++k) {
     const int slot = layout.ref_on_a ? k : count - 1 - k;  // stored in order along tangent_ab
@@ -725,10 +725,12 @@ void Engine::process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCo
     fs_sum += f.shear;
     fn_first_moment += k * f.normal;
     fs_first_moment += k * f.shear;
-    slip_weighted += f.plastic_slip * end * span.spacing;
+    excess_sum += f.excess_shear;
     length_total += end * span.spacing;
   }
   node_updates_ += count;
+  // Sum of slip x tributary length: excess / (ks A) x length = excess / (ks width) per node.
+  const double slip_weighted = excess_sum / (law.shear_stiffness() * scene_.width);
   const Vec2 resultant = fn_sum * n + fs_sum * t;
   const double moment = cross(p0, resultant) + cross(dp, fn_first_moment * n + fs_first_moment * t);
   apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
@@ -753,7 +755,7 @@ void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& g
                            const std::vector<double>& lengths) {
   const int count = static_cast<int>(s_nodes.size());
   const bool plain = group.plain;
-  double slip_weighted = 0, length_total = 0;
+  double excess_sum = 0, length_total = 0;
   bool touching = false;
   Vec2 resultant = Vec2::Zero();
   double moment = 0;
@@ -786,9 +788,10 @@ void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& g
     const Vec2 force_on_b = f.normal * layout.normal_ab + f.shear * layout.tangent_ab;
     resultant += force_on_b;
     moment += cross(point, force_on_b);
-    slip_weighted += f.plastic_slip * lengths[k];
+    excess_sum += f.excess_shear;
     length_total += lengths[k];
   }
+  const double slip_weighted = excess_sum / (group.material.shear_stiffness * scene_.width);
   apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
 }
 
