@@ -50,7 +50,9 @@ def main():
     for c in d["candidates"]:
         if not c.get("tried") or not c.get("params"):
             continue
-        folder = os.path.join(a.diagnosis, "candidates", c["effect"])
+        # the extended scenes: candidates/EFFECT, or candidates/EFFECT@TARGET for a targeted effect
+        # (a support's block, a joint "a/b")
+        folder = os.path.join(a.diagnosis, "candidates", c["effect"] + ("@" + c["target"] if c.get("target") else ""))
         scenes = {n: os.path.join(folder, "scene-%s.json" % n) for n in cases}
         models.append(("+ " + c["effect"], c["params"], scenes))
     rows, report = [], {}
