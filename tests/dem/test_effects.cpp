@@ -137,6 +137,28 @@ TEST(FrictionSoftening, SlidingResistanceFallsFromPeakToResidualOverTheSlipLengt
               weight * tan_p, r.force.back(), weight * tan_r);
 }
 
+// The joint's slip report (JointReport::slip), through the plain law's loop and through the node
+// loop of a group with an effect: a block pushed along its base slides by its travel less the
+// joint's elastic shear F / (ks A). Each step's plastic slip is the part of that step's shear
+// displacement the limit does not take, so the two agree to round-off (measured: 9 digits); 1e-6
+// leaves room for the block's inertia in the actuator force.
+TEST(JointReport, SlipIsTheTravelLessTheElasticShear) {
+  for (const bool softening : {false, true}) {
+    Scene s = block_on_base(30);
+    if (softening) {
+      set_parameter(s, "friction_residual_deg", 20.0);
+      set_parameter(s, "slip_softening", 2e-3);
+    }
+    actuate(s, Vec2(-0.1, 0), Vec2(1, 0), 3e-4, 3e-3, 1e8);
+    const Recording r = simulate(s);
+    ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+    ASSERT_EQ(r.joints.size(), 1u);
+    const double expected = r.gauge_values[0].back() - r.force.back() / (4e8 * kArea);
+    EXPECT_NEAR(r.joints[0].slip, expected, 1e-6 * expected) << "softening " << softening;
+    EXPECT_TRUE(r.joints[0].sliding);
+  }
+}
+
 TEST(Cohesion, BondedBlockBreaksAtCohesionTimesAreaPlusFriction) {
   // Pushed along the joint: every node reaches c a + tan(phi) n at once, so the breaking load is
   // c A + W tan(phi) and afterwards the plain W tan(phi). 1 %: the recording interval (0.25 um of
