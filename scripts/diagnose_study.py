@@ -7,7 +7,7 @@ well its parameters came back, and how far the error fell.
 usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5] [--first-seed 1]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
                          [--candidate-simulations 80] [--surrogate-kind mlp] [--fit-abutment] [--window measured] [--magnitude 1]
-                         [--every 5] [--match-sampling] [--jobs 1]
+                         [--every 5] [--match-sampling] [--kn-upper 1e10] [--candidates N] [--jobs 1]
 
 Each case and seed gets OUT_DIR/<case>/seed-<s>/ (measured.csv, campaign.json, the diagnosis in
 diag/). A finished diagnosis (diag/diagnosis.json) is read, not run again, so the study resumes.
@@ -106,7 +106,8 @@ def run_one(binary, args, case, seed):
             subprocess.run([binary, "diagnose", os.path.join(folder, "campaign.json"), "--out",
                             os.path.join(folder, "diag"), "--effects", args.effects, "--candidate-simulations",
                             str(args.candidate_simulations), "--no-report",
-                            *(["--surrogate-kind", args.surrogate_kind] if args.surrogate_kind else [])],
+                            *(["--surrogate-kind", args.surrogate_kind] if args.surrogate_kind else []),
+                            *(["--candidates", str(args.candidates)] if args.candidates else [])],
                            check=True, stdout=log, stderr=subprocess.STDOUT)
     with open(result) as f:
         return json.load(f)
@@ -173,6 +174,8 @@ def main():
                    help="the campaign's simulation recorded at the measurement's rate (record_interval)")
     p.add_argument("--kn-upper", type=float, default=1e10,
                    help="top of the campaign's kn range (Pa/m; the base fit of stiffening joints presses against it)")
+    p.add_argument("--candidates", type=int, default=0,
+                   help="effects each diagnosis calibrates, best signatures first (0: demcal's default)")
     p.add_argument("--jobs", type=int, default=1)
     args = p.parse_args()
     if not args.magnitude > 0:
