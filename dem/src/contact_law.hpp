@@ -22,8 +22,7 @@ struct NodeForces {
   double normal = 0;         // N, compression positive
   double shear = 0;          // N along the contact tangent, acting on the second block
   // N by which the trial shear exceeded the limit (0 while sticking): the node slid excess / (ks A)
-  // in this step. Callers that weight slip by tributary length sum it and divide once, by ks times
-  // the joint's width, instead of one division per sliding node.
+  // in this step. The joint's slip report sums it and divides once (Engine::apply_pair_sums).
   double excess_shear = 0;
 };
 
@@ -33,8 +32,6 @@ class MohrCoulombLaw {
  public:
   explicit MohrCoulombLaw(const JointMaterial& m)
       : kn_(m.normal_stiffness), ks_(m.shear_stiffness), tan_phi_(std::tan(m.friction_angle)) {}
-
-  double shear_stiffness() const { return ks_; }
 
   NodeForces evaluate(const NodeKinematics& k, double& shear_state) const {
     NodeForces f;

@@ -226,8 +226,10 @@ class Engine {
                           const EdgeSpan& span);
   // Ends every node loop: the pair's summed node force (on b; its opposite on a) and its moment about
   // the origin go to both blocks, and while loading the joint's mean slip and first touch are kept.
+  // `excess_sum`, the touching nodes' shear beyond the limit (N), gives the slip: a node's
+  // excess / (ks A) weighted by its tributary length l = A / width is excess / (ks width).
   void apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, const Vec2& resultant, double moment,
-                       double slip_weighted, double length_total);
+                       double excess_sum, double length_total);
   void integrate();
   double unbalanced_ratio() const;
   double actuator_force() const;
@@ -729,22 +731,23 @@ void Engine::process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCo
     length_total += end * span.spacing;
   }
   node_updates_ += count;
-  // Sum of slip x tributary length: excess / (ks A) x length = excess / (ks width) per node.
-  const double slip_weighted = excess_sum / (law.shear_stiffness() * scene_.width);
   const Vec2 resultant = fn_sum * n + fs_sum * t;
   const double moment = cross(p0, resultant) + cross(dp, fn_first_moment * n + fs_first_moment * t);
-  apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
+  apply_pair_sums(a, b, contact, touching, resultant, moment, excess_sum, length_total);
 }
 
 void Engine::apply_pair_sums(Body& a, Body& b, Contact& contact, bool touching, const Vec2& resultant, double moment,
-                             double slip_weighted, double length_total) {
+                             double excess_sum, double length_total) {
   if (touching) {
     b.force += resultant;
     b.torque += moment - cross(b.position, resultant);
     a.force -= resultant;
     a.torque -= moment - cross(a.position, resultant);
   }
-  if (loading_stage_ && length_total > 0) contact.slip += slip_weighted / length_total;
+  if (loading_stage_ && length_total > 0) {
+    const double slip_weighted = excess_sum / (groups_[contact.group].material.shear_stiffness * scene_.width);
+    contact.slip += slip_weighted / length_total;
+  }
   if (touching && loading_stage_) contact.ever_touched = true;
 }
 
@@ -791,8 +794,7 @@ void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& g
     excess_sum += f.excess_shear;
     length_total += lengths[k];
   }
-  const double slip_weighted = excess_sum / (group.material.shear_stiffness * scene_.width);
-  apply_pair_sums(a, b, contact, touching, resultant, moment, slip_weighted, length_total);
+  apply_pair_sums(a, b, contact, touching, resultant, moment, excess_sum, length_total);
 }
 
 // The broad phase's exact test: the two boxes, grown by `margin`, overlap along x and along y. It is
