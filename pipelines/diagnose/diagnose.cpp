@@ -816,7 +816,8 @@ double error_floor(double noise, double scatter, const DiagnoseOptions& options)
 ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeries& simulated) {
   ChannelResidual r = base;
   const auto envelope = smoothing::loading_envelope(simulated);
-  if (envelope.x.size() < 2) throw smoothing::CurveError("a simulated curve has fewer than two loading points");
+  // on the base's grid, held beyond its reach (a one-point envelope: a gauge that never passed its start)
+  if (envelope.x.empty()) throw smoothing::CurveError("a simulated curve has no loading point");
   for (std::size_t i = 0; i < r.displacement.size(); ++i) r.simulated[i] = smoothing::interpolate(envelope, r.displacement[i]);
   complete_residual(r);
   detail::note_simulated_sampling(r, simulated, envelope);

@@ -88,6 +88,8 @@ std::pair<double, double> objective_window(const XYSeries& e, const XYSeries& s,
   return {lower, upper};
 }
 
+std::size_t fewest_simulated_points(ObjectiveWindow window) { return window == ObjectiveWindow::measured ? 1 : 2; }
+
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
                       const std::string& label, ObjectiveWindow window) {
   if (points < 2) throw std::invalid_argument("channel_misfit: points must be >= 2");
@@ -95,8 +97,9 @@ double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, in
   const XYSeries s = loading_envelope(simulation);
   if (e.x.size() < 2)
     throw CurveError(label + ": the experiment has fewer than 2 loading points (finite, increasing displacement)");
-  if (s.x.size() < 2)
-    throw CurveError(label + ": the simulation has fewer than 2 loading points (finite, increasing displacement)");
+  if (s.x.size() < fewest_simulated_points(window))
+    throw CurveError(label + ": the simulation has " + (s.x.empty() ? "no loading point" : "fewer than 2 loading points") +
+                     " (finite, increasing displacement)");
   const auto [lower, upper] = objective_window(e, s, window, label);
   double sum = 0;
   for (int k = 0; k < points; ++k) {
@@ -250,10 +253,19 @@ std::vector<FitnessResult> Objective2::evaluate_batch(const std::vector<Curve>& 
   for (std::size_t i = 0; i < simulations.size(); ++i) {
     std::map<std::string, double> values;
     for (const auto& c : channels[i]) {
-      const auto& r = smoothed[next++];
+      const auto& r = smoothed[next];
+      const XYSeries& input = inputs[next++];
       const std::string label = channel_label(experiment_, simulations[i], c);
-      if (r.status != SmoothStatus::ok) throw CurveError(label + ": cannot smooth the simulation: " + r.message);
-      values[c] = channel_misfit(smoothed_experiment_.at(c), r.smoothed, objective_.points, label, objective_.window);
+      // A one-point envelope, which the measured window scores, has no curve to smooth: it is its own fit.
+      XYSeries start_only;
+      if (r.status != SmoothStatus::ok) {
+        start_only = loading_envelope(input);
+        if (r.status != SmoothStatus::too_few_points || start_only.x.size() != 1 ||
+            fewest_simulated_points(objective_.window) != 1)
+          throw CurveError(label + ": cannot smooth the simulation: " + r.message);
+      }
+      values[c] = channel_misfit(smoothed_experiment_.at(c), r.status == SmoothStatus::ok ? r.smoothed : start_only,
+                                 objective_.points, label, objective_.window);
     }
     out.push_back(combine(values, objective_));
   }

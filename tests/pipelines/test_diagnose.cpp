@@ -337,6 +337,26 @@ TEST(Residual, AMeasurementGapAtAFastEventIsReported) {
   EXPECT_EQ(sparse_measurement_note(d), "");
 }
 
+// A simulated gauge that only moves backwards (its envelope the first reading alone) is compared
+// as holding that reading's force over the measured window, in the residual analysis and on a base
+// fit's grid: a poor fit, not a failed run.
+TEST(Residual, AGaugeThatOnlyMovedBackwardsIsHeldAtItsStart) {
+  smoothing::XYSeries measured, backwards;
+  for (int i = 0; i <= 40; ++i) {
+    measured.x.push_back(1e-6 * i);
+    measured.y.push_back(100.0 * i);
+    backwards.x.push_back(-1e-6 * i);
+    backwards.y.push_back(50.0 * i);
+  }
+  const ChannelResidual held = analyse_channel(measured, backwards, 200, smoothing::ObjectiveWindow::measured);
+  for (std::size_t i = 0; i < held.simulated.size(); ++i) EXPECT_EQ(held.simulated[i], 0.0);
+  EXPECT_NEAR(held.rms, 100.0 * 40 * std::sqrt((2.0 * 199 + 1) / (6 * 199)), 1e-6 * held.rms);  // RMS of a 0-4000 N ramp
+  const ChannelResidual fit = analyse_channel(measured, measured, 200, smoothing::ObjectiveWindow::measured);
+  EXPECT_NEAR(resimulated(fit, backwards).rms, held.rms, 1e-9 * held.rms);
+  EXPECT_THROW(analyse_channel(measured, backwards, 200, smoothing::ObjectiveWindow::common), smoothing::CurveError);
+  EXPECT_THROW(resimulated(fit, smoothing::XYSeries{}), smoothing::CurveError);
+}
+
 // The friction-softening measurement of docs/diagnose.md ("The measured window"), seed 1: cohesion
 // passes the criterion with 565 N, friction softening falls short of it (its residual still smooth)
 // with 429 N: the criterion alone would name the worse fit, so neither is chosen.

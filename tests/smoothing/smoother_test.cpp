@@ -259,6 +259,29 @@ TEST(Objective2, CachesTheExperimentAndBatchesSimulations) {
   EXPECT_THROW(objective.evaluate(wrong), CurveError);
 }
 
+TEST(Objective2, MeasuredWindowHoldsAGaugeThatOnlyMovedBackwards) {
+  // As objective 1: a one-point simulated envelope has no curve to smooth and is held at its force.
+  const auto family = synthetic_family(2, 21);
+  Curve e;
+  e.source = "e.csv";
+  e.columns = {{"dv", "m", family[0].noisy.x}, {"force", "N", family[0].noisy.y}};
+  Curve s = e;
+  s.source = "s.csv";
+  for (double& x : s.columns[0].values) x = -x;  // every reading after the first goes backwards
+  ObjectiveOptions measured;
+  measured.window = ObjectiveWindow::measured;
+  SmootherOptions smoother;
+  smoother.epochs = 150;
+  const Objective2 objective(e, measured, smoother);
+  const XYSeries held{{0.0}, {s.columns[1].values.front()}};
+  const auto batch = objective.evaluate_batch({s, e});
+  EXPECT_DOUBLE_EQ(batch[0].channels.at("dv"),
+                   channel_misfit(objective.smoothed_experiment().at("dv"), held, 200, "dv", ObjectiveWindow::measured));
+  EXPECT_GT(batch[0].fitness, 10 * batch[1].fitness);
+  const Objective2 common(e, {}, smoother);
+  EXPECT_THROW(common.evaluate(s), CurveError);
+}
+
 TEST(Synthetic, TruthPeaksWhereAskedAndNoiseIsBounded) {
   SyntheticCurveOptions o;
   const auto c = make_synthetic_curve(o);

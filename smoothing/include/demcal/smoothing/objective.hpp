@@ -15,7 +15,10 @@
 //      share no displacement range). `measured`: [min w_exp, max w_exp], the simulated envelope held
 //      at its end forces where it does not reach. With `common`, a simulated gauge that hardly moves
 //      shrinks its channel's window to a sliver of the measured range, over which it matches: a fit
-//      that keeps a gauge still scores near zero on that gauge (docs/smoothing.md).
+//      that keeps a gauge still scores near zero on that gauge (docs/smoothing.md). With `measured`,
+//      a simulated gauge that never passes its first reading (it moved only against the loading
+//      direction: an abutment pushed back) has a one-point envelope and is scored as holding that
+//      point's force over the whole window; with `common` such a channel has no window (an error).
 //   3. `points` (200) evenly spaced w in [lower, upper], both ends included; F_exp and F_sim
 //      linearly interpolated there.
 //   4. f_c = sqrt(sum_k (F_exp,k - F_sim,k)^2).
@@ -75,8 +78,13 @@ double interpolate(const XYSeries& envelope, double x);
 std::pair<double, double> objective_window(const XYSeries& experiment_envelope, const XYSeries& simulation_envelope,
                                            ObjectiveWindow window, const std::string& label = "channel");
 
-// f_c of one channel from two series (steps 1–4). Throws CurveError (naming `label`) when a series
-// has fewer than 2 envelope points or the window is empty.
+// The fewest simulated envelope points a window can score: 1 with `measured` (held over the
+// window), 2 with `common`.
+std::size_t fewest_simulated_points(ObjectiveWindow window);
+
+// f_c of one channel from two series (steps 1–4). Throws CurveError (naming `label`) when the
+// experiment has fewer than 2 envelope points, the simulation fewer than fewest_simulated_points,
+// or the window is empty.
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
                       const std::string& label = "channel", ObjectiveWindow window = ObjectiveWindow::common);
 
