@@ -728,35 +728,46 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
     }
   }
   const double noise = overall_noise(d.base_residuals);
-  // One effect passes, but another fits the curves better by more than the noise without passing
-  // (it adds more parameters, or its gain lies on a channel with few independent points): both
-  // explain part of the residual, and the criterion alone would name the worse fit. The data cannot
-  // tell them apart.
-  std::vector<EffectCandidate*> better_fits;
-  if (tied.size() == 1)
-    for (auto* c : short_of_criterion)
-      if (std::isfinite(c->error) && c->error < tied.front()->error - noise) better_fits.push_back(c);
-  if (!better_fits.empty()) {
+  // One effect passes, and another that does not is as good by one of the two measures: it fits the
+  // curves better by more than the noise (it adds more parameters, or its gain lies on a channel
+  // with few independent points), or its criterion is within the tie margin of the passing one's
+  // while it lowers the error too (the passing one is then preferred no more clearly than between
+  // two that both pass). The data cannot tell them apart.
+  std::vector<EffectCandidate*> rivals;
+  std::string rival_names;
+  if (tied.size() == 1) {
     auto* passing = tied.front();
-    std::string names;
-    for (auto* c : better_fits) {
+    for (auto* c : short_of_criterion) {
+      if (!std::isfinite(c->error)) continue;
+      const bool fits_better = c->error < passing->error - noise;
+      const bool as_likely = c->score - passing->score < options.tie_margin && c->error < d.error_before;
+      if (!fits_better && !as_likely) continue;
+      rivals.push_back(c);
       c->verdict = "tied";
-      c->reason = "fits the curves better than " + passing->effect + " (error " + format_number(c->error) +
-                  " against " + format_number(passing->error) + " N) but does not pass the criterion (" +
-                  format_number(c->score) + ")";
-      names += (names.empty() ? "" : " and ") + c->effect + " (" + format_number(c->error) + " N, criterion " +
-               format_number(c->score) + ")";
+      c->reason = fits_better ? "fits the curves better than " + passing->effect + " (error " + format_number(c->error) +
+                                    " against " + format_number(passing->error) + " N) but does not pass the criterion (" +
+                                    format_number(c->score) + ")"
+                              : "does not pass the criterion (" + format_number(c->score) + ") but falls short of " +
+                                    passing->effect + "'s (" + format_number(passing->score) + ") by less than " +
+                                    format_number(options.tie_margin) + ", with the error lowered to " +
+                                    format_number(c->error) + " N";
+      rival_names += (rival_names.empty() ? "" : "; ") + c->effect + " (" + format_number(c->error) + " N, criterion " +
+                     format_number(c->score) + ") " +
+                     (fits_better ? "comes closer to the curves without passing the criterion"
+                                  : "falls short of its criterion by less than " + format_number(options.tie_margin));
     }
+  }
+  if (!rivals.empty()) {
+    auto* passing = tied.front();
     passing->verdict = "tied";
-    passing->reason = "passes the criterion (" + format_number(passing->score) + ") but fits the curves less well than " +
-                      names;
+    passing->reason = "passes the criterion (" + format_number(passing->score) + "), but " + rival_names;
     d.chosen.clear();
     d.error_after = d.error_before;
     d.verdict = "The data cannot tell which effect is missing: " + passing->effect + " passes the criterion (error " +
                 format_number(d.error_before) + " -> " + format_number(passing->error) + " N, criterion " +
-                format_number(passing->score) + "), but " + names + (better_fits.size() > 1 ? " come" : " comes") +
-                " closer to the curves without passing it. Each explains part of the residual and none reaches the "
-                "noise (about " + format_number(noise) + " N); the model is not extended.";
+                format_number(passing->score) + "), but " + rival_names +
+                ". Each explains part of the residual, none clearly better (measurement noise about " +
+                format_number(noise) + " N); the model is not extended.";
     return;
   }
   if (tied.size() == 1) {

@@ -209,7 +209,7 @@ struct DiagnoseOptions {
   int max_candidates = 3;                 // effects calibrated at most, best signature first, >= 1
   int candidate_evaluations = 0;          // simulations per candidate calibration; 0 = the campaign's
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
-  double tie_margin = 6;                  // accepted effects closer than this are tied, >= 0
+  double tie_margin = 6;                  // effects whose criteria are closer than this are tied, >= 0
   double noise_level_ratio = 1.25;        // base RMS / noise at or below this: nothing to explain, >= 1
   // Re-runs of the base best with every free parameter moved by k x 1e-7 of itself (k = 1..n): the
   // simulation's own scatter, since stick-slip events of a block model fall at other moments for
@@ -391,9 +391,11 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 // the held-out data not spoilt; two accepted within tie_margin are tied, and so are two accepted
 // of which the criterion prefers one and the error the other; one accepted while a
 // candidate short of the criterion fits the curves better by more than the noise: both tied (the
-// criterion would name the worse fit). None: "No effect needed", or "No effect found" when the
-// base error exceeds kUnexplainedRatio x the noise and scatter combined and a candidate was fitted
-// (the model lacks something the candidates do not supply; the closest is named).
+// criterion would name the worse fit); and so are one accepted and a candidate that lowers the
+// error and falls short of its criterion by less than tie_margin. None: "No effect needed", or
+// "No effect found" when the base error exceeds kUnexplainedRatio x the noise and scatter combined
+// and a candidate was fitted (the model lacks something the candidates do not supply; the closest
+// is named).
 constexpr double kUnexplainedRatio = 2;
 void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 
