@@ -733,16 +733,14 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   // with few independent points), or its criterion is within the tie margin of the passing one's
   // while it lowers the error too (the passing one is then preferred no more clearly than between
   // two that both pass). The data cannot tell them apart.
-  std::vector<EffectCandidate*> rivals;
-  std::string rival_names;
   if (tied.size() == 1) {
     auto* passing = tied.front();
+    std::string rivals;  // each rival with its error, criterion and why it ties
     for (auto* c : short_of_criterion) {
       if (!std::isfinite(c->error)) continue;
       const bool fits_better = c->error < passing->error - noise;
       const bool as_likely = c->score - passing->score < options.tie_margin && c->error < d.error_before;
       if (!fits_better && !as_likely) continue;
-      rivals.push_back(c);
       c->verdict = "tied";
       c->reason = fits_better ? "fits the curves better than " + passing->effect + " (error " + format_number(c->error) +
                                     " against " + format_number(passing->error) + " N) but does not pass the criterion (" +
@@ -751,24 +749,23 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
                                     passing->effect + "'s (" + format_number(passing->score) + ") by less than " +
                                     format_number(options.tie_margin) + ", with the error lowered to " +
                                     format_number(c->error) + " N";
-      rival_names += (rival_names.empty() ? "" : "; ") + c->effect + " (" + format_number(c->error) + " N, criterion " +
-                     format_number(c->score) + ") " +
-                     (fits_better ? "comes closer to the curves without passing the criterion"
-                                  : "falls short of its criterion by less than " + format_number(options.tie_margin));
+      rivals += (rivals.empty() ? "" : "; ") + c->effect + " (" + format_number(c->error) + " N, criterion " +
+                format_number(c->score) + ") " +
+                (fits_better ? "comes closer to the curves without passing the criterion"
+                             : "falls short of its criterion by less than " + format_number(options.tie_margin));
     }
-  }
-  if (!rivals.empty()) {
-    auto* passing = tied.front();
-    passing->verdict = "tied";
-    passing->reason = "passes the criterion (" + format_number(passing->score) + "), but " + rival_names;
-    d.chosen.clear();
-    d.error_after = d.error_before;
-    d.verdict = "The data cannot tell which effect is missing: " + passing->effect + " passes the criterion (error " +
-                format_number(d.error_before) + " -> " + format_number(passing->error) + " N, criterion " +
-                format_number(passing->score) + "), but " + rival_names +
-                ". Each explains part of the residual, none clearly better (measurement noise about " +
-                format_number(noise) + " N); the model is not extended.";
-    return;
+    if (!rivals.empty()) {
+      passing->verdict = "tied";
+      passing->reason = "passes the criterion (" + format_number(passing->score) + "), but " + rivals;
+      d.chosen.clear();
+      d.error_after = d.error_before;
+      d.verdict = "The data cannot tell which effect is missing: " + passing->effect + " passes the criterion (error " +
+                  format_number(d.error_before) + " -> " + format_number(passing->error) + " N, criterion " +
+                  format_number(passing->score) + "), but " + rivals +
+                  ". Each explains part of the residual, none clearly better (measurement noise about " +
+                  format_number(noise) + " N); the model is not extended.";
+      return;
+    }
   }
   if (tied.size() == 1) {
     auto* c = tied.front();
