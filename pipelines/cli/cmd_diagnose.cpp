@@ -18,6 +18,8 @@ struct DiagnoseFlags {
   std::string effects = "all";
   std::string held_out;
   bool no_report = false, quiet = false, no_bounds = false;
+  // an explicit --candidates caps a split base too, unless --candidates-at-split says otherwise
+  bool candidates_given = false, at_split_given = false;
 };
 
 // Names separated by commas; "all" or "" = none (every effect, for --effects).
@@ -39,6 +41,7 @@ void run(const DiagnoseFlags& f) {
   o.report = !f.no_report;
   o.bound_parameters = !f.no_bounds;
   o.progress = !f.quiet;
+  if (f.candidates_given && !f.at_split_given) o.candidates_at_split = o.max_candidates;
   const Diagnosis d = run_diagnosis(config, o);
   std::cout << d.verdict << "\n";
   std::cout << "error before " << d.error_before << " N, after " << d.error_after << " N; " << d.simulations
@@ -59,7 +62,11 @@ void setup(CLI::App& app) {
   sub->add_option("--held-out-ratio", o.held_out_reproduced_ratio,
                   "Held-out channels check the fits where the base fit's RMS is at most this many times their noise")->capture_default_str();
   sub->add_option("--max-simulations", o.max_simulations, "Budget of the whole diagnosis (0 = the campaign's per calibration)");
-  sub->add_option("--candidates", o.max_candidates, "Effects calibrated at most, best signature first")->capture_default_str();
+  auto* candidates =
+      sub->add_option("--candidates", o.max_candidates, "Effects calibrated at most, best signature first")->capture_default_str();
+  auto* at_split = sub->add_option("--candidates-at-split", o.candidates_at_split,
+                                   "Effects calibrated at most where the base fit's re-runs scatter by more than the noise "
+                                   "(0 = every effect; default: every effect, or --candidates when given)");
   sub->add_option("--candidate-simulations", o.candidate_evaluations, "Simulations per candidate calibration (0 = the campaign's)");
   sub->add_option("--candidate-algorithm", o.candidate_algorithm,
                   "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
@@ -80,7 +87,11 @@ void setup(CLI::App& app) {
                   "Runs per re-fit of the other parameters at a value the bounds' check rules out (0 = no re-fit)")
       ->capture_default_str();
   sub->add_flag("--quiet", flags->quiet, "No progress lines");
-  sub->callback([flags] { run(*flags); });
+  sub->callback([flags, candidates, at_split] {
+    flags->candidates_given = candidates->count() > 0;
+    flags->at_split_given = at_split->count() > 0;
+    run(*flags);
+  });
 }
 
 }  // namespace

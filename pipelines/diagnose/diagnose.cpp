@@ -32,6 +32,8 @@ void DiagnoseOptions::Validate() const {
   if (output.empty()) fail("output", "\"\"", "must name a folder");
   if (max_simulations < 0) fail("max_simulations", std::to_string(max_simulations), "must be >= 0");
   if (max_candidates < 1) fail("max_candidates", std::to_string(max_candidates), "must be >= 1");
+  if (candidates_at_split < 0)
+    fail("candidates_at_split", std::to_string(candidates_at_split), "must be >= 0 (0: every effect)");
   if (candidate_evaluations < 0) fail("candidate_evaluations", std::to_string(candidate_evaluations), "must be >= 0");
   if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
@@ -832,15 +834,31 @@ ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeri
   return r;
 }
 
+bool response_splits(double scatter, double noise, const DiagnoseOptions& options) {
+  return scatter > options.scatter_floor_ratio * noise;
+}
+
+int candidates_to_calibrate(bool splits, const DiagnoseOptions& options) {
+  if (!splits) return options.max_candidates;
+  if (options.candidates_at_split == 0) return std::numeric_limits<int>::max();
+  return std::max(options.max_candidates, options.candidates_at_split);
+}
+
 std::string split_response_note(const Diagnosis& d, const DiagnoseOptions& options) {
   const double noise = overall_noise(d.base_residuals), scatter = overall(d.scatter);
-  if (!(scatter > options.scatter_floor_ratio * noise)) return "";
+  if (!response_splits(scatter, noise, options)) return "";
   std::string rerun_errors;
   for (const double e : d.base_rerun_errors) rerun_errors += (rerun_errors.empty() ? "" : ", ") + format_number(e);
-  return " The base fit sits where the model's response splits: its re-runs, parameters moved by 1e-7, score " +
-         rerun_errors + " N and scatter by " + format_number(scatter) + " N, " + format_number(scatter / noise, 2) +
-         " x the noise; that scatter is the point's, not the model's, and the floor counts it up to " +
-         format_number(options.scatter_floor_ratio, 2) + " x the noise.";
+  std::string note = " The base fit sits where the model's response splits: its re-runs, parameters moved by 1e-7, score " +
+                     rerun_errors + " N and scatter by " + format_number(scatter) + " N, " +
+                     format_number(scatter / noise, 2) +
+                     " x the noise; that scatter is the point's, not the model's, and the floor counts it up to " +
+                     format_number(options.scatter_floor_ratio, 2) + " x the noise.";
+  const auto tried = std::count_if(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return c.tried; });
+  if (tried > options.max_candidates)
+    note += " The signatures, differences of single runs there, do not rank the effects: " + std::to_string(tried) +
+            " were calibrated instead of the top " + std::to_string(options.max_candidates) + ".";
+  return note;
 }
 
 std::string base_at_bound_note(const Diagnosis& d, const optimise::ParameterSpace& space) {
@@ -1116,12 +1134,21 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     std::stable_sort(d.candidates.begin(), d.candidates.end(),
                      [](const auto& a, const auto& b) { return a.signature_score > b.signature_score; });
 
-    // 4. extended calibrations, best signature first, within the budget
+    // 4. extended calibrations, best signature first, within the budget; where the base response
+    // splits, more of them (the signatures rank by realisation there)
+    const bool splits = response_splits(scatter, noise, options);
+    const int limit = candidates_to_calibrate(splits, options);
+    if (splits && limit > options.max_candidates)
+      progress(options, "the base fit sits where the response splits (scatter " + format_number(scatter) +
+                            " N, noise " + format_number(noise) + " N): " +
+                            (limit == std::numeric_limits<int>::max() ? std::string("every effect")
+                                                                       : "up to " + std::to_string(limit) + " effects") +
+                            " calibrated, not the top " + std::to_string(options.max_candidates) + " by signature");
     int tried = 0;
     for (auto& c : d.candidates) {
       if (!models.count(c.effect)) continue;
-      if (tried >= options.max_candidates) {
-        c.reason = "ranked below the " + std::to_string(options.max_candidates) + " effects tried";
+      if (tried >= limit) {
+        c.reason = "ranked below the " + std::to_string(limit) + " effects tried";
         continue;
       }
       long budget = per_candidate;

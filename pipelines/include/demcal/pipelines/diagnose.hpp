@@ -207,6 +207,13 @@ struct DiagnoseOptions {
   // campaign's budget for the base and `candidate_evaluations` for each of the others.
   long max_simulations = 0;
   int max_candidates = 3;                 // effects calibrated at most, best signature first, >= 1
+  // Effects calibrated at most when the base fit sits where the model's response splits (its re-runs
+  // scatter by more than scatter_floor_ratio x the noise, response_splits). There a signature is the
+  // difference of single runs, each one realisation of the split, and ranks effects by realisation
+  // as much as by shape (measured: joint closure ranked fifth of seven, 12 %, on a measurement its
+  // own calibration then fitted to the noise; docs/diagnose.md). 0 (the default): every effect;
+  // otherwise >= 1, and at least max_candidates.
+  int candidates_at_split = 0;
   int candidate_evaluations = 0;          // simulations per candidate calibration; 0 = the campaign's
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
   double tie_margin = 6;                  // effects whose criteria are closer than this are tied, >= 0
@@ -361,9 +368,18 @@ std::string unfitted_data_note(const Diagnosis& diagnosis);
 constexpr double kNarrowWindow = 0.5;
 std::string narrow_window_note(const Diagnosis& diagnosis);
 
+// Whether the base fit's re-runs scatter (overall, N) by more than options.scatter_floor_ratio x the
+// noise (N): the fit sits where the model's response splits. False for a NaN scatter (no re-runs).
+bool response_splits(double scatter, double noise, const DiagnoseOptions& options);
+
+// How many effects step 4 calibrates at most: options.max_candidates, or where the base response
+// splits options.candidates_at_split (0: every effect), never fewer than max_candidates.
+int candidates_to_calibrate(bool splits, const DiagnoseOptions& options);
+
 // A sentence for the verdict when the base fit's re-runs scatter by more than
-// options.scatter_floor_ratio x the noise: the fit sits where the model's response splits, and the
-// floor counted that scatter only up to the cap (error_floor). "" otherwise.
+// options.scatter_floor_ratio x the noise: the fit sits where the model's response splits, the
+// floor counted that scatter only up to the cap (error_floor), and the candidates were not chosen
+// by their signatures (candidates_to_calibrate). "" otherwise.
 std::string split_response_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // A sentence for the verdict naming the base fit's free parameters within kAtBound (a share of the
