@@ -42,6 +42,21 @@ smoothing::XYSeries sampled(int n, double noise, std::uint64_t seed, double (*f)
   return s;
 }
 
+// A diagnosis whose base fit misses one channel (main/load_vertical, noise 66 N) by `error` N and
+// whose re-runs scored `reruns` and scatter by `scatter` N.
+Diagnosis base_with_reruns(double error, std::vector<double> reruns, double scatter) {
+  Diagnosis d;
+  d.error_before = error;
+  d.base_rerun_errors = std::move(reruns);
+  ChannelResidual base;
+  base.case_name = "main";
+  base.channel = "load_vertical";
+  base.noise = 66;
+  d.base_residuals = {base};
+  d.scatter = {{"main/load_vertical", scatter}};
+  return d;
+}
+
 }  // namespace
 
 TEST(Residual, NoiseEstimateRecoversTheNoiseOfACurvedMeasurement) {
@@ -457,15 +472,7 @@ TEST(Evidence, AScatterAboveTheNoiseDoesNotExcuseTheBase) {
   bad.scatter_floor_ratio = 0;
   EXPECT_THROW(bad.Validate(), CampaignError);
 
-  Diagnosis d;
-  d.error_before = 197;
-  d.base_rerun_errors = {177, 197, 333};
-  ChannelResidual base;
-  base.case_name = "main";
-  base.channel = "load_vertical";
-  base.noise = 66;
-  d.base_residuals = {base};
-  d.scatter = {{"main/load_vertical", 188}};
+  Diagnosis d = base_with_reruns(197, {177, 197, 333}, 188);
   EffectCandidate c;
   c.effect = "cohesion";
   c.tried = true;
@@ -512,15 +519,7 @@ TEST(Evidence, ASplitBaseCalibratesEveryEffect) {
   }
 
   // the verdict says how many were calibrated instead of the top three
-  Diagnosis d;
-  d.error_before = 235;
-  d.base_rerun_errors = {176, 389, 235};
-  ChannelResidual base;
-  base.case_name = "main";
-  base.channel = "load_vertical";
-  base.noise = 66;
-  d.base_residuals = {base};
-  d.scatter = {{"main/load_vertical", 233}};
+  Diagnosis d = base_with_reruns(235, {176, 389, 235}, 233);
   for (const char* effect : {"support-compliance", "joint-gap", "cohesion", "joint-closure"}) {
     EffectCandidate c;
     c.effect = effect;
