@@ -18,8 +18,6 @@ struct DiagnoseFlags {
   std::string effects = "all";
   std::string held_out;
   bool no_report = false, quiet = false, no_bounds = false;
-  // an explicit --candidates caps a split base too, unless --candidates-at-split says otherwise
-  bool candidates_given = false, at_split_given = false;
 };
 
 // Names separated by commas; "all" or "" = none (every effect, for --effects).
@@ -41,7 +39,6 @@ void run(const DiagnoseFlags& f) {
   o.report = !f.no_report;
   o.bound_parameters = !f.no_bounds;
   o.progress = !f.quiet;
-  if (f.candidates_given && !f.at_split_given) o.candidates_at_split = o.max_candidates;
   const Diagnosis d = run_diagnosis(config, o);
   std::cout << d.verdict << "\n";
   std::cout << "error before " << d.error_before << " N, after " << d.error_after << " N; " << d.simulations
@@ -88,8 +85,8 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   sub->add_flag("--quiet", flags->quiet, "No progress lines");
   sub->callback([flags, candidates, at_split] {
-    flags->candidates_given = candidates->count() > 0;
-    flags->at_split_given = at_split->count() > 0;
+    // an explicit --candidates caps a split base too, unless --candidates-at-split says otherwise
+    if (candidates->count() > 0 && at_split->count() == 0) flags->options.candidates_at_split = flags->options.max_candidates;
     run(*flags);
   });
 }

@@ -1139,11 +1139,9 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     const bool splits = response_splits(scatter, noise, options);
     const int limit = candidates_to_calibrate(splits, options);
     if (splits && limit > options.max_candidates)
-      progress(options, "the base fit sits where the response splits (scatter " + format_number(scatter) +
-                            " N, noise " + format_number(noise) + " N): " +
-                            (limit == std::numeric_limits<int>::max() ? std::string("every effect")
-                                                                       : "up to " + std::to_string(limit) + " effects") +
-                            " calibrated, not the top " + std::to_string(options.max_candidates) + " by signature");
+      progress(options, "the base fit sits where the response splits (scatter " + format_number(scatter) + " N, noise " +
+                            format_number(noise) + " N): more than the top " + std::to_string(options.max_candidates) +
+                            " effects by signature are calibrated (--candidates-at-split)");
     int tried = 0;
     for (auto& c : d.candidates) {
       if (!models.count(c.effect)) continue;

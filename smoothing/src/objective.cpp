@@ -257,15 +257,16 @@ std::vector<FitnessResult> Objective2::evaluate_batch(const std::vector<Curve>& 
       const XYSeries& input = inputs[next++];
       const std::string label = channel_label(experiment_, simulations[i], c);
       // A one-point envelope, which the measured window scores, has no curve to smooth: it is its own fit.
+      const XYSeries* fit = &r.smoothed;
       XYSeries start_only;
       if (r.status != SmoothStatus::ok) {
         start_only = loading_envelope(input);
         if (r.status != SmoothStatus::too_few_points || start_only.x.size() != 1 ||
             fewest_simulated_points(objective_.window) != 1)
           throw CurveError(label + ": cannot smooth the simulation: " + r.message);
+        fit = &start_only;
       }
-      values[c] = channel_misfit(smoothed_experiment_.at(c), r.status == SmoothStatus::ok ? r.smoothed : start_only,
-                                 objective_.points, label, objective_.window);
+      values[c] = channel_misfit(smoothed_experiment_.at(c), *fit, objective_.points, label, objective_.window);
     }
     out.push_back(combine(values, objective_));
   }
