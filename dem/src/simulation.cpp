@@ -154,6 +154,7 @@ class Engine {
     build_bodies();
     build_groups();
     points_ = scene_.contact.points_per_joint;
+    segments_ = points_ - 1;
     cos_edge_tolerance_ = std::cos(scene_.contact.edge_angle_tolerance);
     margin_ = scene_.contact.search_margin;
     // The broad phase's skin: a twentieth of the smallest block's box (a few mm for masonry units),
@@ -259,6 +260,7 @@ class Engine {
   std::vector<PairWork> work_;  // this step's touching pairs, in candidate order
   std::vector<int> order_;
   int points_ = 15;
+  double segments_ = 14;  // points_ - 1, as a double (converted once, not per pair)
   double cos_edge_tolerance_ = 1;
   double margin_ = 0;
   double dt_ = 0;
@@ -583,7 +585,7 @@ bool Engine::pair_geometry(int ia, int ib, int& contact_index, PairWork& work) {
     const double lo = std::max(0.0, std::min(s1, s2)), hi = std::min(ref_length, std::max(s1, s2));
     if (hi - lo <= 1e-9 * ref_length) return false;
     const double g1 = (q1 - r1).dot(normal), g2 = (q2 - r1).dot(normal);
-    span = {lo, (hi - lo) / (points_ - 1), s1, g1, (g2 - g1) / (s2 - s1)};
+    span = {lo, (hi - lo) / segments_, s1, g1, (g2 - g1) / (s2 - s1)};
     note_edge_in_contact(ref_on_a ? b : a, inc_edge);
   } else {
     // Corner against face: the deepest vertex of the incident polygon, if it lies over the face.
@@ -603,7 +605,7 @@ bool Engine::pair_geometry(int ia, int ib, int& contact_index, PairWork& work) {
                                     (inc.vertex(previous) - inc.vertex(deepest)).norm());
     work.corner_s = s;
     work.corner_gap = depth;
-    work.corner_length = shorter / (2.0 * (points_ - 1));
+    work.corner_length = shorter / (2.0 * segments_);
     note_edge_in_contact(ref_on_a ? b : a, previous);
     note_edge_in_contact(ref_on_a ? b : a, deepest);
   }
@@ -699,8 +701,13 @@ void Engine::edge_nodes(const EdgeSpan& span) {
 // linear in k (p0 + k dp, g0 + k dg, i0 + k di) and the moment of the resultant follows from four
 // sums over the touching nodes: p0 x (F_n n + F_s t) + dp x (K_n n + K_s t), with F the sums of
 // f_n, f_s and K the sums of k f_n, k f_s. The loop is left with the law itself.
-void Engine::process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& law,
+void Engine::process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCoulombLaw& group_law,
                                 const NodeLayout& layout, const EdgeSpan& span) {
+  // The law's constants and the node arrays in locals: the loop's stores to the contact's arrays
+  // could otherwise alias them, and each node would load them again.
+  const MohrCoulombLaw law = group_law;
+  double* __restrict gaps = contact.gap.data();
+  double* __restrict shears = contact.shear.data();
   const int count = points_;
   const double g0 = span.g1 + (span.lo - span.s1) * span.slope, dg = span.spacing * span.slope;
   const Vec2 p0 = layout.r1 + span.lo * layout.tr + 0.5 * g0 * layout.normal;
@@ -711,22 +718,23 @@ void Engine::process_plain_edge(Body& a, Body& b, Contact& contact, const MohrCo
   const double inner_area = span.spacing * scene_.width;
   double fn_sum = 0, fs_sum = 0, fn_first_moment = 0, fs_first_moment = 0, excess_sum = 0, length_total = 0;
   bool touching = false;
-  for (int k = 0; k < count; ++k) {
+  double index = 0;  // k as a double, counted rather than converted (exact for any node count)
+  for (int k = 0; k < count; ++k, index += 1) {
     const int slot = layout.ref_on_a ? k : count - 1 - k;  // stored in order along tangent_ab
-    const double gap = g0 + k * dg;
-    contact.gap[slot] = gap;
+    const double gap = g0 + index * dg;
+    gaps[slot] = gap;
     const double end = k == 0 || k == count - 1 ? 0.5 : 1.0;
     NodeKinematics kin;
     kin.penetration = -gap;
     kin.area = end * inner_area;
-    kin.shear_increment = i0 + k * di;
-    const NodeForces f = law.evaluate(kin, contact.shear[slot]);
+    kin.shear_increment = i0 + index * di;
+    const NodeForces f = law.evaluate(kin, shears[slot]);
     if (f.normal == 0) continue;
     touching = true;
     fn_sum += f.normal;
     fs_sum += f.shear;
-    fn_first_moment += k * f.normal;
-    fs_first_moment += k * f.shear;
+    fn_first_moment += index * f.normal;
+    fs_first_moment += index * f.shear;
     excess_sum += f.excess_shear;
     length_total += end * span.spacing;
   }
@@ -945,9 +953,17 @@ double Engine::unbalanced_ratio() const {
   return max_weight_ > 0 ? worst / max_weight_ : worst;
 }
 
+// A cheap pass first, without square roots: a Euclidean norm is at most the sum of the absolute
+// components, and a NaN or an infinity fails the comparisons, so a block whose sums stay within the
+// limits passes every check below. Only a block that does not is checked exactly.
 RunStatus Engine::check_state(std::string& message) const {
   for (const Body& b : bodies_) {
     if (b.fixed) continue;
+    const double speed_bound = std::abs(b.velocity.x()) + std::abs(b.velocity.y()) + std::abs(b.angular_velocity) * b.radius;
+    const double moved_bound = std::abs(b.position.x() - b.start_position.x()) + std::abs(b.position.y() - b.start_position.y());
+    if (speed_bound <= scene_.solver.max_velocity && moved_bound <= scene_.solver.collapse_displacement &&
+        std::isfinite(b.angle))
+      continue;
     if (!b.position.allFinite() || !std::isfinite(b.angle) || !b.velocity.allFinite()) {
       message = "non-finite state of block '" + b.name + "'";
       return RunStatus::unstable;
