@@ -22,6 +22,17 @@ using test_support::round_off_realisations;
 
 namespace {
 
+// Expects the options to be rejected with a message containing `fragment`; `accepted` names the
+// fault for the failure message.
+void expect_rejected(const DiagnoseOptions& options, const std::string& fragment, const std::string& accepted) {
+  try {
+    options.Validate();
+    FAIL() << accepted << " was accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+  }
+}
+
 double normal(std::mt19937_64& rng) {
   auto uniform = [&] { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; };
   const double u1 = uniform(), u2 = uniform();
@@ -511,12 +522,7 @@ TEST(Evidence, ASplitBaseCalibratesEveryEffect) {
   options.scatter_floor_ratio = 4;  // the same threshold as the error floor's cap
   EXPECT_FALSE(response_splits(233, 66, options));
   options.candidates_at_split = -1;
-  try {
-    options.Validate();
-    FAIL() << "a negative candidates_at_split was accepted";
-  } catch (const CampaignError& e) {
-    EXPECT_NE(std::string(e.what()).find("candidates_at_split = -1"), std::string::npos) << e.what();
-  }
+  expect_rejected(options, "candidates_at_split = -1", "a negative candidates_at_split");
 
   // the verdict says how many were calibrated instead of the top three
   Diagnosis d = base_with_reruns(235, {176, 389, 235}, 233);
@@ -639,23 +645,13 @@ TEST(Evidence, ParameterBoundsRefitTheOthersBeforeRulingAValueOut) {
 TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   DiagnoseOptions o;
   o.effects = {"joint-closure", "moss"};
-  try {
-    o.Validate();
-    FAIL() << "an unknown effect was accepted";
-  } catch (const CampaignError& e) {
-    EXPECT_NE(std::string(e.what()).find("moss"), std::string::npos) << e.what();
-  }
+  expect_rejected(o, "moss", "an unknown effect");
   o.effects.clear();
   o.max_candidates = 0;
   EXPECT_THROW(o.Validate(), CampaignError);
   o.max_candidates = 1;
   o.profile_evaluations = -1;
-  try {
-    o.Validate();
-    FAIL() << "a negative re-fit budget was accepted";
-  } catch (const CampaignError& e) {
-    EXPECT_NE(std::string(e.what()).find("profile_evaluations = -1"), std::string::npos) << e.what();
-  }
+  expect_rejected(o, "profile_evaluations = -1", "a negative re-fit budget");
 }
 
 // ---- the loop on engine-made data -------------------------------------------------------------
