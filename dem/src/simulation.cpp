@@ -92,19 +92,23 @@ struct Body {
     sin_angle = sin_new;
   }
   void update_world() {
-    const Eigen::Matrix2d m = rotation();
-    box_min = Vec2::Constant(std::numeric_limits<double>::infinity());
-    box_max = -box_min;
+    // The rotation's columns as vectors built from the two scalars (a matrix on the stack is stored
+    // as scalars and read back as a vector, which stalls the store buffer); the same operations.
+    const Vec2 column_x(cos_angle, sin_angle), column_y(-sin_angle, cos_angle);
+    Vec2 low = Vec2::Constant(std::numeric_limits<double>::infinity()), high = -low;
     for (std::size_t i = 0; i < local.size(); ++i) {
-      const Vec2 w = position + m * local[i], n = m * local_normals[i];
-      box_min = box_min.cwiseMin(w);
-      box_max = box_max.cwiseMax(w);
+      const Vec2 w = position + (column_x * local[i].x() + column_y * local[i].y());
+      const Vec2 n = column_x * local_normals[i].x() + column_y * local_normals[i].y();
+      low = low.cwiseMin(w);
+      high = high.cwiseMax(w);
       world_x[i] = w.x();
       world_y[i] = w.y();
       normal_x[i] = n.x();
       normal_y[i] = n.y();
       edge_offset[i] = w.dot(n);
     }
+    box_min = low;
+    box_max = high;
   }
 };
 
