@@ -41,7 +41,23 @@ std::vector<std::string> candidate_paths() {
   return paths;
 }
 
+// LibTorch, oneDNN and OpenBLAS choose their kernels by the processor (AVX-512 where it has them,
+// else AVX2), and float results differ between those kernels in the last bits. A search that trains a
+// network on them (the "mlp" surrogate, objective 2's libtorch smoother) is chaotic in such bits and
+// would take another path on another processor. On every processor with AVX2 and FMA the three are
+// held to their AVX2 kernels (OpenBLAS's Zen set, the project's reference machines'), so a campaign
+// repeats bit for bit across such processors. Set before the libraries load; a value the user set wins.
+void hold_kernels_to_avx2() {
+#if defined(__x86_64__)
+  if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return;
+  setenv("ATEN_CPU_CAPABILITY", "avx2", 0);
+  setenv("ONEDNN_MAX_CPU_ISA", "AVX2", 0);
+  setenv("OPENBLAS_CORETYPE", "ZEN", 0);
+#endif
+}
+
 LoadedPlugin load_plugin() {
+  hold_kernels_to_avx2();
   LoadedPlugin plugin;
   std::string tried;
   for (const auto& path : candidate_paths()) {

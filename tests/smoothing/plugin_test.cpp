@@ -7,6 +7,8 @@
 
 #include <array>
 #include <cstdio>
+#include <cstdlib>
+#include <string>
 #include <fstream>
 #include <sstream>
 #include <sys/wait.h>
@@ -51,6 +53,25 @@ TEST(LibTorchPlugin, NativeTrainingLeavesLibTorchUnloadedAndLibTorchTrainingLoad
   EXPECT_EQ(smooth_batch({small_curve()}, o)[0].status, SmoothStatus::ok);
   EXPECT_TRUE(libtorch_mapped());
   EXPECT_NE(libtorch_plugin_path().find("libdemcal_torch.so"), std::string::npos);
+}
+
+// On a processor with AVX2 and FMA, opening the plugin holds LibTorch, oneDNN and OpenBLAS to their
+// AVX2 kernels (so that a network's training, and every search that uses it, repeats across such
+// processors); a value already in the environment is kept.
+TEST(LibTorchPlugin, KernelsAreHeldToAvx2WhereTheProcessorHasIt) {
+  const std::array<std::array<const char*, 2>, 3> held = {
+      {{"ATEN_CPU_CAPABILITY", "avx2"}, {"ONEDNN_MAX_CPU_ISA", "AVX2"}, {"OPENBLAS_CORETYPE", "ZEN"}}};
+  std::array<std::string, 3> before;
+  for (std::size_t i = 0; i < held.size(); ++i)
+    if (const char* v = std::getenv(held[i][0])) before[i] = v;
+  EXPECT_NE(libtorch_plugin_path().find("libdemcal_torch.so"), std::string::npos);
+  if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma"))
+    GTEST_SKIP() << "no AVX2 and FMA: every library keeps its own choice";
+  for (std::size_t i = 0; i < held.size(); ++i) {
+    const char* now = std::getenv(held[i][0]);
+    ASSERT_NE(now, nullptr) << held[i][0];
+    EXPECT_EQ(std::string(now), before[i].empty() ? held[i][1] : before[i]) << held[i][0];
+  }
 }
 
 TEST(LibTorchPlugin, DemcalProgramDoesNotLinkLibTorch) {
