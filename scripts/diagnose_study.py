@@ -45,7 +45,7 @@ def hidden_effect(case, magnitude=1.0):
         # the scene's own friction set to the truth too, which the residual may not exceed
         return (["--friction-deg", "%r" % BASE_TRUTH["friction_deg"], "--friction-residual-deg", "%g" % residual,
                  "--slip-softening", "0.001"],
-                {"friction_residual_deg": residual, "slip_softening": 0.001})
+                {"friction_loss_deg": 10.3 * m, "slip_softening": 0.001})
     if case == "joint-closure":
         # the hyperbola departs from the linear law the more, the smaller its maximum closure
         return ["--closure-max", "%g" % (1e-4 / m)], {"closure_max": 1e-4 / m}

@@ -74,7 +74,7 @@ class EffectLaw {
       : kn_(m.normal_stiffness),
         ks_(m.shear_stiffness),
         tan_peak_(std::tan(m.friction_angle)),
-        tan_residual_(std::tan(m.friction_residual)),
+        tan_residual_(std::tan(m.residual_friction())),
         slip_softening_(m.slip_softening),
         closure_max_(m.closure_max),
         cohesion_(m.cohesion),

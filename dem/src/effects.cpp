@@ -22,8 +22,10 @@ std::vector<Effect> build_registry() {
   r.push_back({"friction-softening",
                "friction falls linearly with accumulated slip from its peak to a residual value",
                EffectTarget::joint_groups,
-               {P{"friction_residual_deg", "deg", "residual friction angle, at most friction_deg", 0, 90, 10, 35,
-                  false, 25},
+               // The residual as the loss from the peak: friction_deg - friction_loss_deg stays a valid
+               // residual whatever friction a calibration tries beside it.
+               {P{"friction_loss_deg", "deg", "friction angle lost from the peak to the residual, at most friction_deg",
+                  0, 90, 0.5, 25, false, 5},
                 P{"slip_softening", "m", "slip over which friction falls to the residual", 0, kInf, 2e-4, 1e-2, true,
                   2e-3}}});
   r.push_back({"cohesion",
@@ -118,16 +120,16 @@ std::vector<std::string> enable_effect(Scene& scene, const std::string& name, co
       for (const auto& g : groups)
         for (const EffectParameter& p : effect.parameters) {
           double value = p.default_value;
-          if (p.name == "friction_residual_deg")
+          if (p.name == "friction_loss_deg")
             value = std::min(value, scene.joint_groups.at(g).friction_angle * 180 / std::numbers::pi);
           set_parameter(scene, g + "." + p.name, value);
         }
       if (targets.empty()) {
         // One name per parameter sets every group; the defaults may differ per group only for
-        // the residual friction (lowered to a group's friction angle), so list per group then.
+        // the friction loss (lowered to a group's friction angle), so list per group then.
         const bool per_group = name == "friction-softening" && scene.joint_groups.size() > 1;
         for (const EffectParameter& p : effect.parameters) {
-          if (per_group && p.name == "friction_residual_deg") {
+          if (per_group && p.name == "friction_loss_deg") {
             for (const auto& g : groups) controls.push_back(g + "." + p.name);
           } else {
             controls.push_back(p.name);

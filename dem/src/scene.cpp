@@ -133,6 +133,15 @@ void JointMaterial::Validate(const std::string& where) const {
     throw SceneError(where + ".friction_residual_deg", "must be in [0, friction_deg = " +
                                                            format_value(friction_angle / kDegree) + "] degrees, got " +
                                                            format_value(friction_residual / kDegree));
+  require_finite(friction_loss, where + ".friction_loss_deg");
+  if (friction_loss < 0 || friction_loss > friction_angle)
+    throw SceneError(where + ".friction_loss_deg", "must be in [0, friction_deg = " +
+                                                       format_value(friction_angle / kDegree) + "] degrees, got " +
+                                                       format_value(friction_loss / kDegree));
+  if (friction_loss > 0 && friction_residual != 0)
+    throw SceneError(where + ".friction_loss_deg", "set friction_residual_deg or friction_loss_deg, not both (got " +
+                                                       format_value(friction_residual / kDegree) + " and " +
+                                                       format_value(friction_loss / kDegree) + " degrees)");
   require_at_most(cohesion, kMaxBondStrength, where + ".cohesion", "Pa");
   require_at_most(tensile_strength, kMaxBondStrength, where + ".tensile_strength", "Pa");
   require_at_most(compressive_strength, kMaxCompressiveStrength, where + ".compressive_strength", "Pa");
@@ -298,6 +307,7 @@ Scene scene_from_json(const json& j, const std::string& source) {
     m.friction_angle = g.number("friction_deg") * kDegree;
     m.closure_max = g.number("closure_max", m.closure_max);
     m.friction_residual = g.number("friction_residual_deg", m.friction_residual / kDegree) * kDegree;
+    m.friction_loss = g.number("friction_loss_deg", m.friction_loss / kDegree) * kDegree;
     m.slip_softening = g.number("slip_softening", m.slip_softening);
     m.cohesion = g.number("cohesion", m.cohesion);
     m.tensile_strength = g.number("tensile_strength", m.tensile_strength);
@@ -415,8 +425,11 @@ json scene_to_json(const Scene& scene) {
     json g = {{"kn", m.normal_stiffness}, {"ks", m.shear_stiffness}, {"friction_deg", m.friction_angle / kDegree}};
     // Effect keys appear only when set, so a scene without effects keeps its text and its hash.
     if (m.closure_max != 0) g["closure_max"] = m.closure_max;
-    if (m.slip_softening != 0 || m.friction_residual != 0) {
-      g["friction_residual_deg"] = m.friction_residual / kDegree;
+    if (m.slip_softening != 0 || m.friction_residual != 0 || m.friction_loss != 0) {
+      if (m.friction_loss != 0)
+        g["friction_loss_deg"] = m.friction_loss / kDegree;
+      else
+        g["friction_residual_deg"] = m.friction_residual / kDegree;
       g["slip_softening"] = m.slip_softening;
     }
     if (m.cohesion != 0) g["cohesion"] = m.cohesion;
@@ -520,15 +533,17 @@ std::pair<std::string, std::string> split_parameter(const std::string& name) {
 
 const std::vector<std::string>& joint_fields() {
   static const std::vector<std::string> fields = {
-      "kn",       "ks",   "friction_deg",     "closure_max",          "friction_residual_deg", "slip_softening",
-      "cohesion", "tensile_strength", "compressive_strength", "crushing_softening"};
+      "kn",       "ks",   "friction_deg",     "closure_max",          "friction_residual_deg", "friction_loss_deg",
+      "slip_softening", "cohesion", "tensile_strength", "compressive_strength", "crushing_softening"};
   return fields;
 }
 const std::vector<std::string>& support_fields() {
   static const std::vector<std::string> fields = {"support_kx", "support_ky", "support_kr"};
   return fields;
 }
-bool is_angle(const std::string& field) { return field == "friction_deg" || field == "friction_residual_deg"; }
+bool is_angle(const std::string& field) {
+  return field == "friction_deg" || field == "friction_residual_deg" || field == "friction_loss_deg";
+}
 bool contains(const std::vector<std::string>& list, const std::string& x) {
   return std::find(list.begin(), list.end(), x) != list.end();
 }
@@ -539,6 +554,7 @@ double& material_field(JointMaterial& m, const std::string& field) {
   if (field == "friction_deg") return m.friction_angle;
   if (field == "closure_max") return m.closure_max;
   if (field == "friction_residual_deg") return m.friction_residual;
+  if (field == "friction_loss_deg") return m.friction_loss;
   if (field == "slip_softening") return m.slip_softening;
   if (field == "cohesion") return m.cohesion;
   if (field == "tensile_strength") return m.tensile_strength;
@@ -613,7 +629,7 @@ ParameterTarget resolve(const Scene& scene, const std::string& name, bool for_re
     return t;
   }
   throw SceneError(where, "unknown parameter (expected kn, ks, friction_deg, closure_max, friction_residual_deg, "
-                          "slip_softening, cohesion, tensile_strength, compressive_strength, crushing_softening "
+                          "friction_loss_deg, slip_softening, cohesion, tensile_strength, compressive_strength, crushing_softening "
                           "[as <joint group>.<name> for one group], <block>.support_kx|support_ky|support_kr, "
                           "beam_kr, gap_intrados or gap_extrados)");
 }
@@ -626,7 +642,12 @@ void set_parameter(Scene& scene, const std::string& name, double value) {
   switch (t.kind) {
     case ParameterTarget::Kind::groups: {
       const double stored = is_angle(t.field) ? value * kDegree : value;
-      for (const auto& g : t.names) material_field(scene.joint_groups.at(g), t.field) = stored;
+      for (const auto& g : t.names) {
+        JointMaterial& m = scene.joint_groups.at(g);
+        material_field(m, t.field) = stored;
+        if (t.field == "friction_loss_deg") m.friction_residual = 0;  // the two forms of the residual
+        if (t.field == "friction_residual_deg") m.friction_loss = 0;  // exclude each other
+      }
       return;
     }
     case ParameterTarget::Kind::blocks:

@@ -330,9 +330,9 @@ double at_fraction(const dem::EffectParameter& p, double t) {
   return p.search_min + t * (p.search_max - p.search_min);
 }
 
-// Upper bound of a residual friction: never above the base friction angle of the same group.
+// Upper bound of a friction loss: never above the base friction angle of the same group.
 double friction_cap(const std::string& name, const std::map<std::string, double>& base) {
-  if (name.find("friction_residual_deg") == std::string::npos) return std::numeric_limits<double>::infinity();
+  if (name.find("friction_loss_deg") == std::string::npos) return std::numeric_limits<double>::infinity();
   const auto dot = name.rfind('.');
   const std::string group_key = dot == std::string::npos ? "friction_deg" : name.substr(0, dot) + ".friction_deg";
   for (const auto& key : {group_key, std::string("friction_deg")})
@@ -471,7 +471,7 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
                                  const std::map<std::string, double>& best, const DiagnoseOptions& options,
                                  long evaluations, const fs::path& folder, const std::map<std::string, double>& warm) {
   CampaignConfig c = fitted_cases(m.config, options);
-  std::map<std::string, double> narrowed_lower;  // residual friction stays below the lowest friction searched
+  std::map<std::string, double> narrowed_lower;  // a friction loss stays below the lowest friction searched
   optimise::ParameterSpace space;
   for (const auto& p : config.space.free_parameters()) {
     optimise::ParameterSpec s = p;
@@ -550,9 +550,14 @@ std::string finding(const EffectCandidate& c, const std::map<std::string, double
   if (c.effect == "joint-closure" && value("closure_max", &a)) {
     s << "the joints are rough and close nonlinearly: they stiffen as they close, up to a maximum closure of about "
       << format_number(a * 1e3) << " mm";
-  } else if (c.effect == "friction-softening" && value("friction_residual_deg", &a) && value("slip_softening", &b)) {
-    s << "friction is lost with sliding: it falls to about " << format_number(a) << "° over "
-      << format_number(b * 1e3) << " mm of slip";
+  } else if (c.effect == "friction-softening" && value("friction_loss_deg", &a) && value("slip_softening", &b)) {
+    s << "friction is lost with sliding: its angle falls by about " << format_number(a) << "°";
+    for (const auto& [k, v] : c.params)
+      if (parameter_field(k) == "friction_deg") {
+        s << " (from " << format_number(v) << "° to " << format_number(v - a) << "°)";
+        break;
+      }
+    s << " over " << format_number(b * 1e3) << " mm of slip";
   } else if (c.effect == "cohesion" && value("cohesion", &a)) {
     s << "the joints are bonded: a cohesion of about " << format_number(a / 1e3) << " kPa";
     if (value("tensile_strength", &b)) s << " and a tensile strength of about " << format_number(b / 1e3) << " kPa";

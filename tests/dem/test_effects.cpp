@@ -137,6 +137,59 @@ TEST(FrictionSoftening, SlidingResistanceFallsFromPeakToResidualOverTheSlipLengt
               weight * tan_p, r.force.back(), weight * tan_r);
 }
 
+// The residual given as the loss from the peak: it follows the friction angle whichever of the two is
+// set first, the law softens to friction_deg - friction_loss_deg (the same curve, force for force,
+// as that residual given as an angle), and the two forms exclude each other.
+TEST(FrictionSoftening, TheLossFromThePeakFollowsTheFrictionAngle) {
+  Scene s = block_on_base(35);
+  set_parameter(s, "slip_softening", 2e-3);
+  set_parameter(s, "friction_loss_deg", 15);
+  set_parameter(s, "friction_deg", 30);  // after the loss: the residual moves with it
+  const JointMaterial& m = s.joint_groups.begin()->second;
+  EXPECT_EQ(m.residual_friction(), 30 * kDeg - 15 * kDeg);
+  EXPECT_NEAR(get_parameter(s, "friction_loss_deg"), 15, 1e-12);
+  EXPECT_NO_THROW(s.Validate("s.json"));
+
+  actuate(s, Vec2(-0.1, 0), Vec2(1, 0), 3e-4, 3e-3, 1e8);
+  Scene as_angle = s;
+  JointMaterial& angle_form = as_angle.joint_groups.begin()->second;
+  angle_form.friction_residual = angle_form.residual_friction();
+  angle_form.friction_loss = 0;
+  const Recording by_loss = simulate(s), by_angle = simulate(as_angle);
+  ASSERT_EQ(by_loss.status, RunStatus::completed) << by_loss.message;
+  EXPECT_EQ(by_loss.force, by_angle.force);
+  EXPECT_LT(by_loss.force.back(), 0.7 * by_loss.peak_force);  // softened: tan 15 deg / tan 30 deg = 0.46
+
+  // Through JSON: the loss is written as the loss, and a file with both forms is refused.
+  const nlohmann::json j = scene_to_json(s);
+  const nlohmann::json& group = j["joint_groups"].begin().value();
+  EXPECT_TRUE(group.contains("friction_loss_deg"));
+  EXPECT_FALSE(group.contains("friction_residual_deg"));
+  EXPECT_EQ(scene_hash(scene_from_json(j, "roundtrip")), scene_hash(s));
+  nlohmann::json both = j;
+  both["joint_groups"].begin().value()["friction_residual_deg"] = 10;
+  try {
+    scene_from_json(both, "both.json").Validate("both.json");
+    ADD_FAILURE() << "a group with both forms of the residual was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("set friction_residual_deg or friction_loss_deg, not both (got 10 and 15"),
+              std::string::npos) << e.what();
+  }
+  // Setting one form clears the other; a loss beyond the friction angle is named with its value.
+  set_parameter(s, "friction_residual_deg", 12);
+  EXPECT_EQ(s.joint_groups.begin()->second.friction_loss, 0);
+  EXPECT_EQ(s.joint_groups.begin()->second.residual_friction(), 12 * kDeg);
+  set_parameter(s, "friction_loss_deg", 40);
+  EXPECT_EQ(s.joint_groups.begin()->second.friction_residual, 0);
+  try {
+    s.Validate("s.json");
+    ADD_FAILURE() << "a loss of 40 degrees from a 30-degree peak was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("friction_loss_deg: must be in [0, friction_deg = 30] degrees, got 40"),
+              std::string::npos) << e.what();
+  }
+}
+
 // The joint's slip report (JointReport::slip), through the plain law's loop and through the node
 // loop of a group with an effect: a block pushed along its base slides by its travel less the
 // joint's elastic shear F / (ks A). Each step's plastic slip is the part of that step's shear
@@ -331,7 +384,7 @@ TEST(BoundaryRestraint, MomentEqualsSpringTimesRotation) {
 TEST(Effects, EveryEffectOffKeepsTheSceneTextAndHash) {
   const Scene arch = make_arch(ArchOptions{});
   const nlohmann::json j = scene_to_json(arch);
-  for (const char* key : {"closure_max", "slip_softening", "friction_residual_deg", "cohesion", "tensile_strength",
+  for (const char* key : {"closure_max", "slip_softening", "friction_residual_deg", "friction_loss_deg", "cohesion", "tensile_strength",
                           "compressive_strength", "crushing_softening"})
     EXPECT_FALSE(j["joint_groups"]["arch_joints"].contains(key)) << key;
   EXPECT_FALSE(j.contains("joint_gap"));

@@ -46,10 +46,17 @@ struct JointMaterial {
   static constexpr double kClosureStiffening = 16;
 
   // friction-softening (on when `slip_softening` > 0): the friction coefficient falls linearly
-  // with a node's accumulated sliding from tan(friction_angle) to tan(friction_residual), reached
-  // after `slip_softening` (m) of slip. JSON/parameter `friction_residual_deg` (degrees).
+  // with a node's accumulated sliding from tan(friction_angle) to tan(residual_friction()), reached
+  // after `slip_softening` (m) of slip. The residual is given one of two ways:
+  //   - as an angle, `friction_residual` (JSON/parameter `friction_residual_deg`, degrees);
+  //   - as the loss from the peak, `friction_loss` (`friction_loss_deg`): residual = friction_angle
+  //     - friction_loss, which follows the peak when friction_angle changes, so a calibration that
+  //     searches both friction and the loss meets no pair with the residual above the peak.
+  // Set one: JSON with both is an error; setting either parameter clears the other.
   double friction_residual = 0;  // rad, in [0, friction_angle]
+  double friction_loss = 0;      // rad, in [0, friction_angle]; > 0 replaces friction_residual
   double slip_softening = 0;     // m; 0 = off
+  double residual_friction() const { return friction_loss > 0 ? friction_angle - friction_loss : friction_residual; }
 
   // cohesion (on when either is > 0): a bond present at the start of the run carries cohesion
   // `cohesion` (Pa: shear limit c A + tan(phi) Fn) and tension up to `tensile_strength` (Pa). A node
@@ -207,7 +214,8 @@ void save_scene(const Scene& scene, const std::string& path);
 std::string scene_hash(const Scene& scene);
 
 // Calibration parameters by name. Joint-group parameters: "kn", "ks" (Pa/m), "friction_deg"
-// (degrees) and the effect parameters "closure_max" (m), "friction_residual_deg" (degrees),
+// (degrees) and the effect parameters "closure_max" (m), "friction_residual_deg" or
+// "friction_loss_deg" (degrees; setting one clears the other),
 // "slip_softening" (m), "cohesion", "tensile_strength", "compressive_strength" (Pa),
 // "crushing_softening" (m): a bare name sets every joint group, "<group>.<name>" one group.
 // Support springs by block: "<block>.support_kx", "<block>.support_ky" (N/m), "<block>.support_kr"
