@@ -8,9 +8,9 @@
 #include <array>
 #include <cstdio>
 #include <cstdlib>
-#include <string>
 #include <fstream>
 #include <sstream>
+#include <string>
 #include <sys/wait.h>
 
 using namespace demcal::smoothing;
