@@ -117,6 +117,14 @@ void require_at_most(double v, double bound, const std::string& where, const std
   if (v > bound) throw SceneError(where, "must be at most " + format_value(bound) + " (" + why + "), got " + format_value(v));
 }
 
+// An angle of the friction law (rad) in [0, friction_angle]; the upper limit only where `capped`.
+void require_within_friction(double angle, double friction_angle, bool capped, const std::string& where) {
+  require_finite(angle, where);
+  if (angle < 0 || (capped && angle > friction_angle))
+    throw SceneError(where, "must be in [0, friction_deg = " + format_value(friction_angle / kDegree) +
+                                "] degrees, got " + format_value(angle / kDegree));
+}
+
 }  // namespace
 
 void JointMaterial::Validate(const std::string& where) const {
@@ -128,16 +136,8 @@ void JointMaterial::Validate(const std::string& where) const {
                      "must be in [0, 90) degrees, got " + format_value(friction_angle / kDegree));
   require_at_most(closure_max, kMaxClosure, where + ".closure_max", "m; a rough joint closes by at most millimetres");
   require_non_negative(slip_softening, where + ".slip_softening");
-  require_finite(friction_residual, where + ".friction_residual_deg");
-  if (friction_residual < 0 || (softening_on() && friction_residual > friction_angle))
-    throw SceneError(where + ".friction_residual_deg", "must be in [0, friction_deg = " +
-                                                           format_value(friction_angle / kDegree) + "] degrees, got " +
-                                                           format_value(friction_residual / kDegree));
-  require_finite(friction_loss, where + ".friction_loss_deg");
-  if (friction_loss < 0 || friction_loss > friction_angle)
-    throw SceneError(where + ".friction_loss_deg", "must be in [0, friction_deg = " +
-                                                       format_value(friction_angle / kDegree) + "] degrees, got " +
-                                                       format_value(friction_loss / kDegree));
+  require_within_friction(friction_residual, friction_angle, softening_on(), where + ".friction_residual_deg");
+  require_within_friction(friction_loss, friction_angle, true, where + ".friction_loss_deg");
   if (friction_loss > 0 && friction_residual != 0)
     throw SceneError(where + ".friction_loss_deg", "set friction_residual_deg or friction_loss_deg, not both (got " +
                                                        format_value(friction_residual / kDegree) + " and " +
