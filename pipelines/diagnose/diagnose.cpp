@@ -712,6 +712,9 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
     }
   }
   std::sort(accepted.begin(), accepted.end(), [](auto* a, auto* b) { return a->score < b->score; });
+  // A curve fit better by less than the noise does not dispute the criterion, here as for the
+  // candidates short of it below.
+  const double noise = overall_noise(d.base_residuals);
   std::vector<EffectCandidate*> tied;
   std::map<const EffectCandidate*, std::string> tie_reasons;
   for (auto* c : accepted) {
@@ -720,10 +723,10 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
       tied.push_back(c);
       tie_reasons[c] = "explains the data as well as the other tied effects (criteria within " +
                        format_number(options.tie_margin) + ")";
-    } else if (c->error < front->error) {
-      // Both pass, the criterion prefers the front and the curves prefer this one (a channel the
-      // front fits better outweighs the others, or the front adds fewer parameters): the two
-      // measures disagree.
+    } else if (c->error < front->error - noise) {
+      // Both pass, the criterion prefers the front and the curves prefer this one by more than the
+      // noise (a channel the front fits better outweighs the others, or the front adds fewer
+      // parameters): the two measures disagree.
       tied.push_back(c);
       tie_reasons[c] = "passes the criterion less clearly than " + front->effect + " (" + format_number(c->score) +
                        " against " + format_number(front->score) + ") but fits the curves better (error " +
@@ -734,7 +737,6 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
                   format_number(c->score) + " against " + format_number(accepted.front()->score) + ")";
     }
   }
-  const double noise = overall_noise(d.base_residuals);
   // One effect passes, and another that does not is as good by one of the two measures: it fits the
   // curves better by more than the noise (it adds more parameters, or its gain lies on a channel
   // with few independent points), or its criterion is within the tie margin of the passing one's

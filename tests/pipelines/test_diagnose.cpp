@@ -448,6 +448,17 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
   for (const auto& c : d.candidates) EXPECT_EQ(c.verdict, "tied") << c.effect << ": " << c.reason;
   EXPECT_NE(d.candidates[0].reason.find("fits the curves better (error 244 against 307 N)"), std::string::npos)
       << d.candidates[0].reason;
+  // Both pass, and the one the criterion prefers less fits the curves better by less than the noise
+  // (the joint-closure measurement at twice the goal's magnitude, seed 2): no disagreement, the
+  // criterion's choice stands.
+  d.candidates = {candidate("boundary-restraint", 216, -17.2), candidate("joint-closure", 222, -185.2)};
+  select_effect(d, options);
+  EXPECT_EQ(d.chosen, std::vector<std::string>{"joint-closure"}) << d.verdict;
+  EXPECT_EQ(d.candidates[0].verdict, "rejected") << d.candidates[0].reason;
+  d.candidates[0].error = 222 - 58;  // by more than the noise (57 N): tied
+  select_effect(d, options);
+  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
+  EXPECT_EQ(d.candidates[0].verdict, "tied") << d.candidates[0].reason;
   // Both pass and agree: the better criterion with the lower error is chosen.
   d.candidates = {candidate("friction-softening", 320, -30.3), candidate("cohesion", 307, -68)};
   select_effect(d, options);

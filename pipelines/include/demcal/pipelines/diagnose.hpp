@@ -405,10 +405,10 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 // base residuals (their noise): each candidate's verdict and reason, diagnosis.chosen, error_after
 // and verdict. Accepted: criterion change below -evidence_threshold, error below the base's, and
 // the held-out data not spoilt; two accepted within tie_margin are tied, and so are two accepted
-// of which the criterion prefers one and the error the other; one accepted while a
-// candidate short of the criterion fits the curves better by more than the noise: both tied (the
-// criterion would name the worse fit); and so are one accepted and a candidate that lowers the
-// error and falls short of its criterion by less than tie_margin. None: "No effect needed", or
+// of which the criterion prefers one and the error the other by more than the noise; one accepted
+// while a candidate short of the criterion fits the curves better by more than the noise: both
+// tied (the criterion would name the worse fit); and so are one accepted and a candidate that
+// lowers the error and falls short of its criterion by less than tie_margin. None: "No effect needed", or
 // "No effect found" when the base error exceeds kUnexplainedRatio x the noise and scatter combined
 // and a candidate was fitted (the model lacks something the candidates do not supply; the closest
 // is named).
