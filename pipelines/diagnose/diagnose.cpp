@@ -733,8 +733,11 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
                        format_number(c->error) + " against " + format_number(front->error) + " N)";
     } else {
       c->verdict = "rejected";
-      c->reason = "explains the data clearly less well than " + accepted.front()->effect + " (criterion " +
-                  format_number(c->score) + " against " + format_number(accepted.front()->score) + ")";
+      c->reason = "explains the data clearly less well than " + front->effect + " (criterion " +
+                  format_number(c->score) + " against " + format_number(front->score) + ")";
+      if (c->error < front->error)
+        c->reason += "; its closer fit of the curves (error " + format_number(c->error) + " against " +
+                     format_number(front->error) + " N) is within the noise (" + format_number(noise) + " N)";
     }
   }
   // One effect passes, and another that does not is as good by one of the two measures: it fits the

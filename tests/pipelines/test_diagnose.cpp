@@ -455,6 +455,8 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
   select_effect(d, options);
   EXPECT_EQ(d.chosen, std::vector<std::string>{"joint-closure"}) << d.verdict;
   EXPECT_EQ(d.candidates[0].verdict, "rejected") << d.candidates[0].reason;
+  EXPECT_NE(d.candidates[0].reason.find("(error 216 against 222 N) is within the noise (57 N)"), std::string::npos)
+      << d.candidates[0].reason;
   d.candidates[0].error = 222 - 58;  // by more than the noise (57 N): tied
   select_effect(d, options);
   EXPECT_TRUE(d.chosen.empty()) << d.verdict;
