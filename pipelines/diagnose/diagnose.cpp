@@ -706,8 +706,11 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
       }
     } else {
       c.verdict = "rejected";
-      c.reason = "the fit does not improve enough for its extra parameters (criterion change " +
-                 format_number(c.score) + ", needs < -" + format_number(options.evidence_threshold) + ")";
+      c.reason = c.score < -options.evidence_threshold
+                     ? "the criterion falls (" + format_number(c.score) + ") but the RMS error does not (" +
+                           format_number(d.error_before) + " -> " + format_number(c.error) + " N)"
+                     : "the fit does not improve enough for its extra parameters (criterion change " +
+                           format_number(c.score) + ", needs < -" + format_number(options.evidence_threshold) + ")";
       short_of_criterion.push_back(&c);
     }
   }

@@ -472,6 +472,14 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
   EXPECT_TRUE(d.chosen.empty());
   EXPECT_NE(d.verdict.find("No effect found"), std::string::npos) << d.verdict;
   EXPECT_NE(d.verdict.find("closest: friction-softening, 846 -> 450 N"), std::string::npos) << d.verdict;
+  // The criterion falls (a channel's relative gain) while the RMS error rises: not accepted, and said so.
+  d.candidates = {candidate("joint-closure", 900, -56)};
+  select_effect(d, options);
+  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
+  EXPECT_EQ(d.candidates[0].verdict, "rejected");
+  EXPECT_NE(d.candidates[0].reason.find("the criterion falls (-56) but the RMS error does not (846 -> 900 N)"),
+            std::string::npos)
+      << d.candidates[0].reason;
   // Near the noise, the same candidates leave nothing to explain.
   d.error_before = 100;
   d.candidates = {candidate("friction-softening", 95, -1), candidate("cohesion", 98, -0.4)};
