@@ -137,13 +137,18 @@ TEST(FrictionSoftening, SlidingResistanceFallsFromPeakToResidualOverTheSlipLengt
               weight * tan_p, r.force.back(), weight * tan_r);
 }
 
-void expect_invalid(Scene s, const std::string& needle) {
+// `read` must throw a SceneError whose message holds `needle`.
+template <typename Read>
+void expect_scene_error(Read read, const std::string& needle) {
   try {
-    s.Validate("s.json");
+    read();
     ADD_FAILURE() << "accepted; expected an error with " << needle;
   } catch (const SceneError& e) {
     EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
   }
+}
+void expect_invalid(Scene s, const std::string& needle) {
+  expect_scene_error([&] { s.Validate("s.json"); }, needle);
 }
 
 // The residual given as the loss from the peak: it follows the friction angle whichever of the two is
@@ -177,13 +182,8 @@ TEST(FrictionSoftening, TheLossFromThePeakFollowsTheFrictionAngle) {
   EXPECT_EQ(scene_hash(scene_from_json(j, "roundtrip")), scene_hash(s));
   nlohmann::json both = j;
   both["joint_groups"].begin().value()["friction_residual_deg"] = 10;
-  try {
-    scene_from_json(both, "both.json");  // validates what it reads
-    ADD_FAILURE() << "a group with both forms of the residual was accepted";
-  } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("set friction_residual_deg or friction_loss_deg, not both (got 10 and 15"),
-              std::string::npos) << e.what();
-  }
+  expect_scene_error([&] { scene_from_json(both, "both.json"); },  // validates what it reads
+                     "set friction_residual_deg or friction_loss_deg, not both (got 10 and 15");
   // Setting one form clears the other; a loss beyond the friction angle is named with its value.
   set_parameter(s, "friction_residual_deg", 12);
   EXPECT_EQ(s.joint_groups.begin()->second.friction_loss, 0);
