@@ -42,7 +42,11 @@ void run(const DiagnoseFlags& f) {
   const Diagnosis d = run_diagnosis(config, o);
   std::cout << d.verdict << "\n";
   std::cout << "error before " << d.error_before << " N, after " << d.error_after << " N; " << d.simulations
-            << " simulations\n";
+            << " simulations";
+  if (d.simulated_this_session != d.simulations)
+    std::cout << " (" << d.simulated_this_session << " run now, " << d.simulations - d.simulated_this_session
+              << " read from the archive)";
+  std::cout << "\n";
   std::cout << "diagnosis: " << o.output << "/diagnosis.json\n";
 }
 

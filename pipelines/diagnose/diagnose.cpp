@@ -131,6 +131,7 @@ class CaseRunner {
     Evaluation e;
     e.cases = predict_cases(config, params);
     simulations_ += static_cast<long>(e.cases.size());
+    simulated_this_session_ += static_cast<long>(e.cases.size());
     std::size_t g = 0;
     for (std::size_t k = 0; k < e.cases.size(); ++k) {
       const auto& p = e.cases[k];
@@ -185,13 +186,20 @@ class CaseRunner {
     return e;
   }
 
+  // Every run the diagnosis has evaluated, its calibrations' archived ones included, so that the
+  // budget and the count of a resumed diagnosis are those of an uninterrupted one.
   long simulations() const { return simulations_; }
-  void add_simulations(long n) { simulations_ += n; }
+  long simulated_this_session() const { return simulated_this_session_; }
+  void add_campaign(const CampaignResult& r) {
+    simulations_ += r.simulations;
+    simulated_this_session_ += r.simulated_this_session;
+  }
 
  private:
   std::map<std::string, smoothing::Curve> measured_;  // by case name
   std::vector<std::string> held_out_cases_;
   long simulations_ = 0;
+  long simulated_this_session_ = 0;  // direct runs and the calibrations' runs not read from the archive
 };
 
 // Concatenated residual (or curve difference) over channels, each channel divided by its noise so
@@ -248,7 +256,7 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
   run.resume = options.resume;
   run.progress = options.progress;
   const CampaignResult result = run_campaign(base, run);
-  runner.add_simulations(result.simulated_this_session);
+  runner.add_campaign(result);
   if (result.status != CampaignStatus::completed || result.best.params.empty())
     throw CampaignError("the base calibration failed: " + result.message);
   *fitness = result.best.fitness;
@@ -1020,7 +1028,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     run.resume = options.resume;
     run.progress = options.progress;
     const CampaignResult r = run_campaign(refine, run);
-    runner.add_simulations(r.simulated_this_session);
+    runner.add_campaign(r);
     if (r.status == CampaignStatus::completed && std::isfinite(r.best.fitness) &&
         (!std::isfinite(d.base_fitness) || r.best.fitness < d.base_fitness)) {
       d.base_params = r.best.params;
@@ -1181,8 +1189,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       run.progress = options.progress;
       try {
         const CampaignResult r = run_campaign(ext, run);
-        runner.add_simulations(r.simulated_this_session);
-        c.simulations = r.simulated_this_session;
+        runner.add_campaign(r);
+        c.simulations = r.simulations;
         c.params = r.best.params;
         c.fitness = r.best.fitness;
         // on every case, the held-out ones included: the fit is judged on the data it did not use too
@@ -1238,6 +1246,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   d.verdict += split_response_note(d, options) + base_at_bound_note(d, config.space) + narrow_window_note(d) +
                sparse_measurement_note(d);
   d.simulations = runner.simulations();
+  d.simulated_this_session = runner.simulated_this_session();
   d.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   {
     std::ofstream out(fs::path(options.output) / "diagnosis.json");
@@ -1303,6 +1312,7 @@ json Diagnosis::to_json() const {
           {"held_out", {{"rms", params_json(held_out_rms)}, {"noise", params_json(held_out_noise)},
                         {"error", finite_or_null(held_out_error)}, {"checks", held_out_checked}}},
           {"simulations", simulations},
+          {"session", {{"simulated", simulated_this_session}}},
           {"wall_time_s", wall_time_s}};
 }
 

@@ -76,7 +76,10 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
   std::ostringstream md;
   md << "# Diagnosis\n\n**" << d.verdict << "**\n\n"
      << "RMS force error over all channels: " << num(d.error_before) << " N before, " << num(d.error_after)
-     << " N after. Simulations: " << d.simulations << "; wall time " << num(d.wall_time_s) << " s.\n\n"
+     << " N after. Simulations: " << d.simulations;
+  if (d.simulated_this_session != d.simulations)
+    md << " (" << d.simulated_this_session << " run by this session, the rest read from the archive)";
+  md << "; wall time " << num(d.wall_time_s) << " s.\n\n"
      << "## Base fit\n\n| parameter | value |\n|---|---|\n";
   for (const auto& [k, v] : d.base_params) md << "| " << k << " | " << num(v, 4) << " |\n";
   if (!d.base_rerun_errors.empty())

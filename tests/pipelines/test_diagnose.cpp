@@ -1007,3 +1007,47 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   EXPECT_EQ(split["verdict"].get<std::string>().find("2 were calibrated instead of the top 1") != std::string::npos, splits)
       << split["verdict"];
 }
+
+// A diagnosis killed during its candidates' calibrations and run again with --resume ends with the
+// diagnosis an uninterrupted run gives: the calibrations read their finished runs from the archive,
+// and the total budget (--max-simulations) counts those runs as the uninterrupted run did.
+TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "resume");
+  const dem::ArchOptions arch = cli_arch();
+  const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, arch);
+  const json j = {{"name", "resume"},
+                  {"scene", {{"generator", "arch"},
+                             {"options", {{"contacts_per_joint", arch.contacts_per_joint}, {"velocity", arch.velocity},
+                                          {"max_displacement", arch.max_displacement}}}}},
+                  {"measured", measured.string()},
+                  {"parameters", {{{"name", "kn"}, {"lower", 1e8}, {"upper", 1e10}, {"scale", "log10"}},
+                                  {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+                  {"fixed", {{"ks", 0.9e9}}},
+                  {"objective", {{"type", 1}, {"window", "measured"}}},
+                  {"optimiser", {{"algorithm", "tbpso"}, {"population", 4}, {"iterations", 3}, {"seed", 1}}},
+                  {"report", false}};
+  std::ofstream(dir / "campaign.json") << j.dump(2);
+  const auto command = [&](const std::string& out) {
+    return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " + (dir / out).string() +
+           " --effects support-compliance,crushing-cap --candidate-simulations 12 --max-simulations 60 --no-report --quiet";
+  };
+  ASSERT_EQ(std::system((command("whole") + " > /dev/null 2>&1").c_str()), 0);
+  // killed (SIGKILL, nothing flushed) half a second after the first candidate's folder appears
+  const std::string killed = "sh -c '" + command("killed") + " > /dev/null 2>&1 & pid=$!; while kill -0 $pid 2>/dev/null && [ ! -d " +
+                             (dir / "killed" / "candidates").string() + " ]; do sleep 0.05; done; sleep 0.5; kill -9 $pid; wait $pid; exit 0'";
+  ASSERT_EQ(std::system(killed.c_str()), 0);
+  ASSERT_TRUE(fs::exists(dir / "killed" / "candidates"));
+  ASSERT_FALSE(fs::exists(dir / "killed" / "diagnosis.json")) << "the run ended before it was killed";
+  ASSERT_EQ(std::system((command("killed") + " --resume > /dev/null 2>&1").c_str()), 0);
+
+  json whole = test_support::read_json(dir / "whole" / "diagnosis.json");
+  json resumed = test_support::read_json(dir / "killed" / "diagnosis.json");
+  // what the resumed session simulated itself: less than the whole, the rest read from the archive
+  EXPECT_LT(resumed["session"]["simulated"].get<long>(), whole["session"]["simulated"].get<long>());
+  EXPECT_EQ(resumed["simulations"], whole["simulations"]);
+  for (json* d : {&whole, &resumed}) {
+    d->erase("wall_time_s");
+    d->erase("session");
+  }
+  EXPECT_EQ(resumed, whole) << "the resumed diagnosis differs from the uninterrupted one: " << json::diff(whole, resumed).dump();
+}

@@ -294,7 +294,7 @@ struct EffectCandidate {
                                            // with the diagnosis's effective_points
   std::string verdict = "not tried";       // "accepted" | "rejected" | "tied" | "not tried"
   std::string reason;                      // one line: why this verdict
-  long simulations = 0;
+  long simulations = 0;                    // of its calibration, archived runs included
   std::vector<ChannelResidual> residuals;  // of the best extended set
   std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
@@ -337,7 +337,10 @@ struct Diagnosis {
   std::map<std::string, double> held_out_noise;
   double held_out_error = kNaN;            // the base fit's RMS force error there, N (NaN: no such data)
   std::vector<std::string> held_out_checked;  // those of its channels that check the fits (held_out_checks)
-  long simulations = 0;                    // the whole diagnosis (archived re-runs excluded)
+  // Runs the whole diagnosis evaluated, those its calibrations read from the archive included: a
+  // resumed diagnosis reports (and budgets, max_simulations) what an uninterrupted one would.
+  long simulations = 0;
+  long simulated_this_session = 0;         // of them, run by this process (the rest from the archive)
   double wall_time_s = 0;
   nlohmann::json to_json() const;          // the diagnosis.json layout
 };
