@@ -1171,7 +1171,9 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         continue;
       }
       long budget = per_candidate;
-      if (options.max_simulations > 0) budget = std::min(budget, options.max_simulations - runner.simulations() - 1);
+      // within a total budget, room is left for the best set's run and re-runs after the calibration
+      if (options.max_simulations > 0)
+        budget = std::min(budget, options.max_simulations - runner.simulations() - (1 + options.scatter_runs));
       if (budget < 2 * config.optimiser.population) {
         c.reason = "over the simulation budget";
         continue;

@@ -1029,7 +1029,7 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
   std::ofstream(dir / "campaign.json") << j.dump(2);
   const auto command = [&](const std::string& out) {
     return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " + (dir / out).string() +
-           " --effects support-compliance,crushing-cap --candidate-simulations 12 --max-simulations 60 --no-report --quiet";
+           " --effects support-compliance,crushing-cap --candidate-simulations 12 --max-simulations 72 --no-report --quiet";
   };
   ASSERT_EQ(std::system((command("whole") + " > /dev/null 2>&1").c_str()), 0);
   // killed (SIGKILL, nothing flushed) half a second after the first candidate's folder appears
@@ -1042,6 +1042,11 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
 
   json whole = test_support::read_json(dir / "whole" / "diagnosis.json");
   json resumed = test_support::read_json(dir / "killed" / "diagnosis.json");
+  // the budget binds: one candidate calibrated, the other left out, every run within it
+  std::vector<bool> tried;
+  for (const auto& c : whole["candidates"]) tried.push_back(c["tried"].get<bool>());
+  EXPECT_EQ(tried, (std::vector<bool>{true, false})) << whole["candidates"].dump();
+  EXPECT_LE(whole["simulations"].get<long>(), 72);
   // what the resumed session simulated itself: less than the whole, the rest read from the archive
   EXPECT_LT(resumed["session"]["simulated"].get<long>(), whole["session"]["simulated"].get<long>());
   EXPECT_EQ(resumed["simulations"], whole["simulations"]);
