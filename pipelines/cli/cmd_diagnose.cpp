@@ -20,13 +20,18 @@ struct DiagnoseFlags {
   bool no_report = false, quiet = false, no_bounds = false;
 };
 
-// Names separated by commas; "all" or "" = none (every effect, for --effects).
-std::vector<std::string> split_names(const std::string& text) {
+// Names separated by commas, each trimmed of spaces; "all" or "" = none (every effect, for
+// --effects). A list that names nothing (",") is an error naming the flag.
+std::vector<std::string> split_names(const std::string& text, const std::string& flag) {
   std::vector<std::string> names;
   if (text == "all" || text.empty()) return names;
   std::stringstream s(text);
-  for (std::string name; std::getline(s, name, ',');)
-    if (!name.empty()) names.push_back(name);
+  for (std::string name; std::getline(s, name, ',');) {
+    const auto first = name.find_first_not_of(" \t");
+    if (first == std::string::npos) continue;
+    names.push_back(name.substr(first, name.find_last_not_of(" \t") - first + 1));
+  }
+  if (names.empty()) throw demcal::pipelines::CampaignError(flag + " '" + text + "' names nothing (names separated by commas)");
   return names;
 }
 
@@ -34,8 +39,8 @@ void run(const DiagnoseFlags& f) {
   using namespace demcal::pipelines;
   const CampaignConfig config = load_campaign(f.campaign_file);
   DiagnoseOptions o = f.options;
-  o.effects = split_names(f.effects);
-  o.held_out_cases = split_names(f.held_out);
+  o.effects = split_names(f.effects, "--effects");
+  o.held_out_cases = split_names(f.held_out, "--held-out");
   o.report = !f.no_report;
   o.bound_parameters = !f.no_bounds;
   o.progress = !f.quiet;

@@ -52,12 +52,13 @@ void DiagnoseOptions::Validate() const {
   if (!wide && !(narrow_log_factor > 1)) fail("narrow_log_factor", std::to_string(narrow_log_factor), "must be > 1 (or 0 with narrow_linear_share 0)");
   if (!wide && !(narrow_linear_share > 0 && narrow_linear_share <= 1))
     fail("narrow_linear_share", std::to_string(narrow_linear_share), "must be in (0, 1] (or 0 with narrow_log_factor 0)");
-  for (const auto& name : effects) {
+  for (auto name = effects.begin(); name != effects.end(); ++name) {
     try {
-      dem::find_effect(name);
+      dem::find_effect(*name);
     } catch (const dem::SceneError& e) {
-      fail("effects", name, e.what());
+      fail("effects", *name, e.what());
     }
+    if (std::find(effects.begin(), name, *name) != name) fail("effects", *name, "named twice");
   }
 }
 
@@ -1005,6 +1006,13 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       throw CampaignError("--held-out: the campaign has no case named '" + name + "'");
   if (fitted_cases(config, options).cases.empty())
     throw CampaignError("--held-out: every case of the campaign is held out, nothing is left to fit");
+  // The base calibration gets at most half of a total budget, and a search needs two populations.
+  if (const long least = 4L * config.optimiser.population;
+      options.max_simulations > 0 && options.base_result.empty() && options.max_simulations < least)
+    throw CampaignError("--max-simulations " + std::to_string(options.max_simulations) +
+                        ": the base calibration gets at most half of it, and needs two populations of " +
+                        std::to_string(config.optimiser.population) + "; give at least " + std::to_string(least) +
+                        " (or --result with a finished base calibration)");
   fs::create_directories(options.output);
   CaseRunner runner(config, options.held_out_cases);
   Diagnosis d;

@@ -667,6 +667,8 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   DiagnoseOptions o;
   o.effects = {"joint-closure", "moss"};
   expect_rejected(o, "moss", "an unknown effect");
+  o.effects = {"cohesion", "joint-closure", "cohesion"};
+  expect_rejected(o, "effects = cohesion: named twice", "an effect named twice");
   o.effects.clear();
   o.max_candidates = 0;
   EXPECT_THROW(o.Validate(), CampaignError);
@@ -931,6 +933,16 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
     EXPECT_NE(text.find("--held-out"), std::string::npos) << text;
   }
   EXPECT_NE(text.find("every case"), std::string::npos) << text;
+  // a list naming nothing; a total budget whose half cannot hold the base calibration's two populations
+  for (const auto& [flags, message] : std::vector<std::pair<std::string, std::string>>{
+           {"--effects ,", "--effects ',' names nothing"}, {"--max-simulations 5", "--max-simulations 5: "}}) {
+    pipe = popen((base + " " + flags + " 2>&1").c_str(), "r");
+    text.clear();
+    while (fgets(buf, sizeof buf, pipe)) text += buf;
+    EXPECT_NE(pclose(pipe), 0) << flags;
+    EXPECT_NE(text.find(message), std::string::npos) << text;
+  }
+  EXPECT_NE(text.find("give at least 16"), std::string::npos) << text;  // population 4
   ASSERT_EQ(std::system((base + " --held-out check --effects support-compliance,crushing-cap --candidates 1 --candidate-simulations 8 > /dev/null 2>&1").c_str()), 0);
   const json d = test_support::read_json(dir / "out" / "diagnosis.json");
   EXPECT_TRUE(d["chosen"].is_array());
@@ -1008,7 +1020,7 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
       << split["verdict"];
 }
 
-// A diagnosis killed during its candidates' calibrations and run again with --resume ends with the
+// A diagnosis killed during a candidate's calibration and run again with --resume ends with the
 // diagnosis an uninterrupted run gives: the calibrations read their finished runs from the archive,
 // and the total budget (--max-simulations) counts those runs as the uninterrupted run did.
 TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
@@ -1029,16 +1041,18 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
   std::ofstream(dir / "campaign.json") << j.dump(2);
   const auto command = [&](const std::string& out) {
     return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " + (dir / out).string() +
-           " --effects support-compliance,crushing-cap --candidate-simulations 12 --max-simulations 72 --no-report --quiet";
+           " --effects support-compliance,crushing-cap --candidate-simulations 12 --max-simulations 72 --no-report";
   };
   ASSERT_EQ(std::system((command("whole") + " > /dev/null 2>&1").c_str()), 0);
-  // killed (SIGKILL, nothing flushed) half a second after the first candidate's folder appears
-  const std::string killed = "sh -c '" + command("killed") + " > /dev/null 2>&1 & pid=$!; while kill -0 $pid 2>/dev/null && [ ! -d " +
-                             (dir / "killed" / "candidates").string() + " ]; do sleep 0.05; done; sleep 0.5; kill -9 $pid; wait $pid; exit 0'";
+  // killed (SIGKILL, nothing flushed) half a second into the first candidate's calibration, which
+  // the progress lines announce
+  const std::string log = (dir / "killed.log").string();
+  const std::string killed = "sh -c '" + command("killed") + " > /dev/null 2> " + log + " & pid=$!; while kill -0 $pid 2>/dev/null && ! grep -q \"calibrating base +\" " +
+                             log + "; do sleep 0.05; done; sleep 0.5; kill -9 $pid; wait $pid; exit 0'";
   ASSERT_EQ(std::system(killed.c_str()), 0);
-  ASSERT_TRUE(fs::exists(dir / "killed" / "candidates"));
   ASSERT_FALSE(fs::exists(dir / "killed" / "diagnosis.json")) << "the run ended before it was killed";
-  ASSERT_EQ(std::system((command("killed") + " --resume > /dev/null 2>&1").c_str()), 0);
+  ASSERT_EQ(std::system(("grep -q \"calibrating base +\" " + log).c_str()), 0) << "killed before its candidates";
+  ASSERT_EQ(std::system((command("killed") + " --quiet --resume > /dev/null 2>&1").c_str()), 0);
 
   json whole = test_support::read_json(dir / "whole" / "diagnosis.json");
   json resumed = test_support::read_json(dir / "killed" / "diagnosis.json");
