@@ -677,6 +677,47 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   expect_rejected(o, "profile_evaluations = -1", "a negative re-fit budget");
 }
 
+// A base calibration reused with --result must be one of the campaign's parameters: otherwise the
+// diagnosis stops before any simulation, naming the file, the parameter and the values.
+TEST(Diagnose, ABaseResultOfOtherParametersIsRefused) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "foreign-result");
+  smoothing::Curve m;
+  for (const char* name : {"load_vertical", "abutment_horizontal", "force"}) m.columns.push_back({name, "", {}});
+  for (int i = 0; i < 10; ++i) {
+    m.columns[0].values.push_back(1e-4 * i);
+    m.columns[1].values.push_back(1e-5 * i);
+    m.columns[2].values.push_back(300.0 * i);
+  }
+  smoothing::write_curve(m, (dir / "measured.csv").string());
+  const json campaign = {{"name", "foreign-result"},
+                         {"scene", {{"generator", "arch"}}},
+                         {"measured", (dir / "measured.csv").string()},
+                         {"parameters", {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+                         {"fixed", {{"kn", 2e9}, {"ks", 0.9e9}}},
+                         {"report", false}};
+  const CampaignConfig config = campaign_from_json(campaign, dir.string(), "foreign-result.json");
+  const std::vector<std::pair<json, std::string>> results = {
+      {{{"friction_deg", 30.8}, {"kn", 1.4e9}, {"ks", 0.9e9}}, "kn = 1.4e+09, but the campaign fixes it at 2e+09"},
+      {{{"kn", 2e9}, {"ks", 0.9e9}}, "no value for the campaign's parameter 'friction_deg'"},
+      {{{"friction_deg", 50.0}}, "friction_deg = 50 lies outside the campaign's bounds [25, 45]"},
+      {{{"friction_deg", 30.8}, {"cohesion", 1e4}}, "'cohesion' is not a parameter of the campaign"}};
+  for (const auto& [params, message] : results) {
+    const fs::path file = dir / "result.json";
+    std::ofstream(file) << json{{"best", {{"params", params}, {"fitness", 1.0}}}}.dump();
+    DiagnoseOptions o;
+    o.output = (dir / "out").string();
+    o.base_result = file.string();
+    o.progress = false;
+    try {
+      run_diagnosis(config, o);
+      ADD_FAILURE() << params.dump() << " was accepted";
+    } catch (const CampaignError& e) {
+      EXPECT_NE(std::string(e.what()).find(file.string() + ": " + message), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(fs::exists(dir / "out" / "archive.sqlite")) << "simulated before the check";
+  }
+}
+
 // ---- the loop on engine-made data -------------------------------------------------------------
 
 namespace {
