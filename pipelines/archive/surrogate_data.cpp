@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iomanip>
 #include <map>
+#include <sstream>
 #include <stdexcept>
 
 using nlohmann::json;
@@ -118,27 +120,46 @@ double curve_fitness(const Eigen::VectorXd& outputs, const std::vector<std::shar
   return fitness;
 }
 
-Eigen::VectorXd unit_point_in_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params) {
+std::string outside_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params) {
+  const auto text = [](double v) {
+    std::ostringstream out;
+    out << std::setprecision(6) << v;
+    return out.str();
+  };
   const auto& free = space.free_parameters();
   const auto& fixed = space.fixed_parameters();
   const auto& tied = space.tied_parameter();
-  const size_t expected = free.size() + fixed.size() + (tied ? 1 : 0);
-  if (params.size() != expected) return {};
-  Eigen::VectorXd physical(static_cast<Eigen::Index>(free.size()));
-  for (size_t k = 0; k < free.size(); ++k) {
-    const auto it = params.find(free[k].name);
-    if (it == params.end() || !(it->second >= free[k].lower && it->second <= free[k].upper)) return {};
-    physical[static_cast<Eigen::Index>(k)] = it->second;
+  for (const auto& p : free) {
+    const auto it = params.find(p.name);
+    if (it == params.end()) return "no value for the campaign's parameter '" + p.name + "'";
+    if (!(it->second >= p.lower && it->second <= p.upper))
+      return p.name + " = " + text(it->second) + " lies outside the campaign's bounds [" + text(p.lower) + ", " +
+             text(p.upper) + "]";
+  }
+  for (const auto& [name, value] : params) {
+    const bool known = fixed.count(name) || (tied && tied->name == name) ||
+                       std::any_of(free.begin(), free.end(), [&](const auto& p) { return p.name == name; });
+    if (!known) return "'" + name + "' is not a parameter of the campaign";
   }
   for (const auto& [name, value] : fixed) {
     const auto it = params.find(name);
-    if (it == params.end() || !same(it->second, value)) return {};
+    if (it == params.end()) return "no value for the campaign's fixed parameter '" + name + "'";
+    if (!same(it->second, value)) return name + " = " + text(it->second) + ", but the campaign fixes it at " + text(value);
   }
   if (tied) {
     const auto it = params.find(tied->name);
     const auto source = params.find(tied->source);
-    if (it == params.end() || source == params.end() || !same(it->second, source->second / tied->ratio)) return {};
+    if (it == params.end() || source == params.end() || !same(it->second, source->second / tied->ratio))
+      return tied->name + " is not " + tied->source + " / " + text(tied->ratio) + ", as the campaign ties it";
   }
+  return "";
+}
+
+Eigen::VectorXd unit_point_in_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params) {
+  if (!outside_space(space, params).empty()) return {};
+  const auto& free = space.free_parameters();
+  Eigen::VectorXd physical(static_cast<Eigen::Index>(free.size()));
+  for (size_t k = 0; k < free.size(); ++k) physical[static_cast<Eigen::Index>(k)] = params.at(free[k].name);
   return space.to_unit(physical).cwiseMax(0.0).cwiseMin(1.0);
 }
 

@@ -5,6 +5,7 @@
 
 #include "demcal/dem/effects.hpp"
 #include "demcal/pipelines/predict.hpp"
+#include "demcal/pipelines/surrogate_data.hpp"
 #include "demcal/smoothing/objective.hpp"
 
 #include <algorithm>
@@ -231,33 +232,6 @@ CampaignConfig fitted_cases(CampaignConfig config, const DiagnoseOptions& option
   return config;
 }
 
-// A reused base calibration (--result) must be one of this campaign's parameter space: every free
-// parameter given and within its bounds, a fixed one at its value, none unknown to the campaign.
-// Throws CampaignError naming the file, the parameter and the values.
-void check_base_result(const std::map<std::string, double>& params, const optimise::ParameterSpace& space,
-                       const std::string& file) {
-  const auto fail = [&](const std::string& what) {
-    throw CampaignError(file + ": " + what + " (--result must be a calibration of this campaign's parameters)");
-  };
-  for (const auto& p : space.free_parameters()) {
-    const auto found = params.find(p.name);
-    if (found == params.end()) fail("no value for the campaign's parameter '" + p.name + "'");
-    if (!(found->second >= p.lower && found->second <= p.upper))
-      fail(p.name + " = " + format_number(found->second, 6) + " lies outside the campaign's bounds [" +
-           format_number(p.lower, 6) + ", " + format_number(p.upper, 6) + "]");
-  }
-  const auto& tied = space.tied_parameter();
-  for (const auto& [name, value] : params) {
-    const auto free = std::find_if(space.free_parameters().begin(), space.free_parameters().end(),
-                                   [&](const auto& p) { return p.name == name; });
-    if (free != space.free_parameters().end() || (tied && tied->name == name)) continue;
-    const auto fixed = space.fixed_parameters().find(name);
-    if (fixed == space.fixed_parameters().end()) fail("'" + name + "' is not a parameter of the campaign");
-    if (std::abs(value - fixed->second) > 1e-12 * std::abs(fixed->second))
-      fail(name + " = " + format_number(value, 6) + ", but the campaign fixes it at " + format_number(fixed->second, 6));
-  }
-}
-
 std::map<std::string, double> base_fit(const CampaignConfig& config, const DiagnoseOptions& options, CaseRunner& runner,
                                        double* fitness) {
   if (!options.base_result.empty()) {
@@ -265,7 +239,9 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
     if (fs::is_directory(result)) result /= "result.json";
     progress(options, "base parameters from " + result.string());
     const auto params = read_result_parameters(result.string());
-    check_base_result(params, config.space, result.string());
+    // a calibration of this campaign's parameters, or the diagnosis would start from another model
+    if (const std::string why = outside_space(config.space, params); !why.empty())
+      throw CampaignError(result.string() + ": " + why + " (--result must be a calibration of this campaign's parameters)");
     std::ifstream in(result);
     const json j = json::parse(in, nullptr, false);
     *fitness = j.is_object() && j.contains("best") && j["best"].contains("fitness") && j["best"]["fitness"].is_number()

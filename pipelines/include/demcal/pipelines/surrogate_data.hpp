@@ -89,7 +89,11 @@ std::vector<surrogate::TrainingRow> archive_training_rows(const RunArchive& arch
                                                           const std::vector<ArchivedCase>& cases,
                                                           std::int64_t max_run_id = INT64_MAX);
 
-// The unit-cube point of a parameter set if it belongs to the space (see above), else empty.
+// Why a parameter set is not a point of the (campaign's) space, "" when it is: a free parameter
+// missing or outside its bounds, a name the space lacks, a fixed value missing or other, the tied
+// value not source / ratio (relative 1e-12). The first reason found, with the name and values.
+std::string outside_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params);
+// The unit-cube point of a parameter set if it belongs to the space (outside_space is ""), else empty.
 Eigen::VectorXd unit_point_in_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params);
 
 // What `demcal surrogate train|check` works on: one scene hash and objective key of an archive, the
