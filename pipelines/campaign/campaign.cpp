@@ -508,6 +508,31 @@ SessionCounts run_iterations(const CampaignContext& ctx, CampaignOptimisers& opt
   return counts;
 }
 
+// Every candidate without a finite fitness, in evaluation order, with the reason archived for its
+// run (its message, or why its fitness is not finite), one entry per case that failed it.
+std::vector<ReportInputs::Failure> failed_runs(const CampaignContext& ctx, const std::vector<EvaluationRecord>& evaluations) {
+  std::vector<ReportInputs::Failure> failures;
+  for (const auto& e : evaluations) {
+    if (std::isfinite(e.fitness)) continue;
+    for (size_t k = 0; k < ctx.config.cases.size() && k < e.run_ids.size(); ++k) {
+      const auto run = ctx.archive.run(e.run_ids[k]);
+      if (!run) continue;
+      std::string reason = run->message;
+      if (usable_status(run->status)) {
+        const auto f = ctx.archive.find_fitness(run->id, ctx.prepared.objective_keys[k]);
+        if (f && std::isfinite(f->fitness)) continue;  // another case failed this candidate
+        if (f && f->channels.contains("error")) {
+          const json& error = f->channels.at("error");
+          reason = "fitness: " + (error.is_string() ? error.get<std::string>() : error.dump());
+        }
+        if (reason.empty()) reason = "no finite fitness";
+      }
+      failures.push_back({e.iteration, e.position, ctx.config.cases[k].name, e.params, run->status, reason});
+    }
+  }
+  return failures;
+}
+
 // The result, from the archive: a resumed campaign reports exactly what an uninterrupted one would.
 CampaignResult collect_result(const CampaignContext& ctx, const CampaignOptimisers& optimisers,
                               const std::vector<EvaluationRecord>& evaluations, const SessionCounts& counts) {
@@ -563,8 +588,18 @@ CampaignResult collect_result(const CampaignContext& ctx, const CampaignOptimise
     }
   }
   if (!std::isfinite(best)) {
+    // the reason the most runs share, with the first case it was archived for
     result.status = CampaignStatus::failed;
     result.message = "no run gave a finite fitness (" + std::to_string(result.failed_runs) + " failed)";
+    const auto failures = failed_runs(ctx, evaluations);
+    std::map<std::string, int> counts;
+    for (const auto& f : failures) ++counts[f.reason];
+    const ReportInputs::Failure* common = nullptr;
+    for (const auto& f : failures)
+      if (common == nullptr || counts[f.reason] > counts[common->reason]) common = &f;
+    if (common != nullptr)
+      result.message += "; " + std::to_string(counts[common->reason]) + " of the " + std::to_string(failures.size()) +
+                        " failed runs: case '" + common->case_name + "', " + common->status + ": " + common->reason;
   }
   return result;
 }
@@ -615,24 +650,7 @@ void write_campaign_report(const CampaignContext& ctx, const CampaignResult& res
       }
     }
   }
-  for (const auto& e : evaluations) {
-    if (std::isfinite(e.fitness)) continue;
-    for (size_t k = 0; k < cases && k < e.run_ids.size(); ++k) {
-      const auto run = archive.run(e.run_ids[k]);
-      if (!run) continue;
-      std::string reason = run->message;
-      if (usable_status(run->status)) {
-        const auto f = archive.find_fitness(run->id, prepared.objective_keys[k]);
-        if (f && std::isfinite(f->fitness)) continue;  // another case failed this candidate
-        if (f && f->channels.contains("error")) {
-          const json& error = f->channels.at("error");
-          reason = "fitness: " + (error.is_string() ? error.get<std::string>() : error.dump());
-        }
-        if (reason.empty()) reason = "no finite fitness";
-      }
-      inputs.failures.push_back({e.iteration, e.position, config.cases[k].name, e.params, run->status, reason});
-    }
-  }
+  inputs.failures = failed_runs(ctx, evaluations);
   write_report(inputs, config.output);
 }
 

@@ -80,6 +80,15 @@ PreparedCases prepare_cases(const CampaignConfig& config) {
     } catch (const std::exception& e) {
       throw CampaignError(std::string("measured curve: ") + e.what());
     }
+    // Every channel is scored (a weight of 0 still reports it), and one without two loading points
+    // fails every run's fitness: refused before any simulation.
+    const auto ends = smoothing::envelope_ends(p.measured.back(), config.objective_options);
+    for (const auto& column : smoothing::displacement_columns(p.measured.back(), config.objective_options))
+      if (!ends.count(column))
+        throw CampaignError(p.measured.back().source + ": channel '" + column + "' of case '" + c.name +
+                            "' has fewer than 2 loading points (rows whose displacement and force are finite and whose "
+                            "displacement exceeds every earlier one): no simulation can be compared with it; leave the "
+                            "column out of the measured data");
     if (config.objective == 2)
       p.objective2.push_back(
           std::make_unique<smoothing::Objective2>(p.measured.back(), config.objective_options, config.smoother));

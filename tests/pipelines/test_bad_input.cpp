@@ -111,6 +111,9 @@ const std::vector<Entry>& catalogue() {
       {"csv_ragged_row", measured_file("top_horizontal,force\n0,0\n0.001\n0.002,5\n"), {"bad.csv", "line 3"}},
       {"csv_duplicate_column", measured_file("force,force\n0,0\n1,1\n"), {"bad.csv", "'force'", "duplicate"}},
       {"csv_no_data_rows", measured_file("top_horizontal,force\n"), {"bad.csv"}},
+      // a gauge that only moves backwards: one loading point, which no run can be scored against
+      {"csv_channel_without_loading_points", measured_file("top_horizontal,force\n0,0\n-0.001,5\n-0.002,7\n"),
+       {"bad.csv", "channel 'top_horizontal'", "fewer than 2 loading points"}},
       {"csv_mapped_column_missing",
        campaign_edit([](json& c, const fs::path&) {
          c["measured"] = {{"file", c["measured"]}, {"columns", {{"force", {{"column", "shear"}}}}}};
@@ -183,6 +186,13 @@ const std::vector<Entry>& catalogue() {
        {"campaign.json", "backend.timeout_s", "must be >= 0, got -1"}},
       {"campaign_zero_max_output", campaign_edit([](json& c, const fs::path&) { c["backend"]["max_output_mb"] = 0; }),
        {"campaign.json", "backend.max_output_mb", "must be > 0 and <= 1048576 (1 TiB), got 0"}},
+      // a simulator that fails every run: the campaign fails with the reason the runs share
+      {"campaign_every_run_fails",
+       campaign_edit([](json& c, const fs::path&) {
+         c["backend"]["command"] = test_support::python() + " -c \"import sys; sys.exit(3)\" {k} {friction_deg} {output}";
+       }),
+       {"no run gave a finite fitness (2 failed)", "2 of the 2 failed runs: case 'main', failed: external command exit code 3"},
+       2},
       {"campaign_unknown_backend", campaign_edit([](json& c, const fs::path&) { c["backend"]["type"] = "cloud"; }),
        {"campaign.json", "backend.type", "'cloud'"}},
       // ---- command line ----
