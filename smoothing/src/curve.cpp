@@ -232,8 +232,12 @@ Curve parse_curve(const std::string& text, const std::string& source, const Curv
     const auto& [number, line] = lines.size() > 1 ? lines[1] : lines[0];
     if (lines.size() == 1)
       throw CurveError(source + ": line " + std::to_string(lines[0].first) + ": no data rows (only a header)");
+    if (is_data_line({trim(line), "0"}, false))  // a number alone on its line: a file of one column
+      throw CurveError(source + ": line " + std::to_string(number) + ": one column only ('" + trim(line) +
+                       "'); a curve needs a force column and at least one displacement column, separated by ',', ';' "
+                       "or a tab");
     throw CurveError(source + ": line " + std::to_string(number) + ": no numeric data rows found (first: '" +
-                     trim(line) + "')");
+                     trim(line) + "'); cells must be numbers separated by ',', ';' or a tab");
   }
 
   // Header: [preamble...] names [units] data...

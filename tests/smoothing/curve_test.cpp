@@ -126,6 +126,8 @@ TEST(Curve, BadInputNamesFileLineAndColumn) {
   expect_error("force,dv\n1,nan\n3,NaN\n4,\n", {"bad.csv", "column 'dv'", "NaN"});
   expect_error("force,dv\n1,2\n3,4,5\n", {"bad.csv", "line 3", "3 cells", "expected 2"});
   expect_error("force,force\n1,2\n3,4\n", {"bad.csv", "line 1", "duplicate", "'force'"});
+  expect_error("force\n0\n1\n2\n", {"bad.csv", "line 2", "one column only ('0')", "at least one displacement column"});
+  expect_error("force dv\n0 1\n1 2\n", {"bad.csv", "line 2", "no numeric data rows", "'0 1'", "separated by ',', ';' or a tab"});  // spaces
   EXPECT_THROW(read_curve("/nonexistent/curve.csv"), CurveError);
   const Curve c = parse_curve("a,b\n1,2\n3,4\n", "ok.csv");
   try {
