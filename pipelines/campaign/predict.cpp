@@ -3,11 +3,17 @@
 #include "campaign_internal.hpp"
 
 #include "demcal/pipelines/backend.hpp"
+#include "demcal/pipelines/process.hpp"
 #include "demcal/smoothing/objective.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
+#include <memory>
 #include <tuple>
 
 namespace demcal::pipelines {
@@ -47,6 +53,60 @@ void compare(const smoothing::Curve& measured, CasePrediction& p, const smoothin
   std::tie(p.simulated_peak, p.simulated_peak_displacement) = peak_in_window(sim, p.window_lower, p.window_upper);
   if (std::isfinite(p.measured_peak) && p.measured_peak != 0)
     p.peak_error = (p.simulated_peak - p.measured_peak) / p.measured_peak;
+}
+
+// One run per case of the campaign's external command (its template, timeout, parallelism and
+// output limit) with the parameter set `values`, each reported to `done`. Its per-run folders go under
+// options.work_folder, or under a temporary folder removed afterwards.
+void predict_through_command(const CampaignConfig& config, const std::map<std::string, double>& values,
+                             const PredictionOptions& options, const OutcomeCallback& done) {
+  namespace fs = std::filesystem;
+  CommandBackendOptions o;
+  o.command = config.backend.command;
+  o.timeout_s = config.backend.timeout_s;
+  o.parallel = options.threads > 0 ? options.threads : config.backend.parallel;
+  o.max_output_bytes = static_cast<long long>(config.backend.max_output_mb * 1024 * 1024);
+  fs::path temporary;
+  if (options.work_folder.empty()) {
+    // a folder of its own: the process id and a counter keep concurrent predictions apart
+    static std::atomic<unsigned> counter{0};
+    temporary = fs::temp_directory_path() /
+                ("demcal-predict-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+    fs::create_directories(temporary);
+    o.work_root = temporary.string();
+  } else {
+    o.work_root = (fs::path(options.work_folder) / "runs").string();
+  }
+  for (const auto& c : config.cases) {
+    o.case_names.push_back(c.name);
+    o.scene_files.push_back(c.scene.file);
+  }
+  for (const auto& [name, value] : values) o.parameter_names.push_back(name);
+  // a placeholder the set does not give is a missing parameter here, not a bad template
+  std::vector<std::string> names;
+  try {
+    names = placeholder_names(split_command_line(o.command));
+  } catch (const std::invalid_argument& e) {
+    throw CampaignError(config.source + ": backend.command: " + e.what());
+  }
+  for (const auto& name : names)
+    if (name != "output" && name != "workdir" && name != "case" && name != "scene" && !values.count(name))
+      throw CampaignError(config.source + ": backend.command takes {" + name + "}, which the parameter set does not give");
+  std::vector<SimulationTask> tasks;
+  for (std::size_t i = 0; i < config.cases.size(); ++i) tasks.push_back({i, values});
+  try {
+    std::unique_ptr<CommandBackend> backend;
+    try {
+      backend = std::make_unique<CommandBackend>(o);
+    } catch (const std::invalid_argument& e) {
+      throw CampaignError(config.source + ": backend.command: " + e.what());
+    }
+    backend->run(tasks, done);
+  } catch (...) {
+    if (!temporary.empty()) fs::remove_all(temporary);
+    throw;
+  }
+  if (!temporary.empty()) fs::remove_all(temporary);
 }
 
 }  // namespace
@@ -118,8 +178,31 @@ std::vector<CasePrediction> predict_cases(const CampaignConfig& config, const st
                                           const PredictionOptions& options) {
   if (config.cases.empty()) throw CampaignError(config.source + ": no case to predict");
   const auto values = complete_parameters(config, params);
-  std::vector<dem::Scene> scenes;
   std::vector<smoothing::Curve> measured;
+  for (const auto& c : config.cases) measured.push_back(load_measured(c.measured));
+
+  std::vector<CasePrediction> out(config.cases.size());
+  const OutcomeCallback compare_case = [&](std::size_t i, SimulationOutcome&& outcome) {
+    CasePrediction& p = out[i];
+    p.name = config.cases[i].name;
+    p.status = outcome.status;
+    p.message = outcome.message;
+    p.simulated = std::move(outcome.curves);
+    p.wall_time_s = outcome.wall_time_s;
+    p.details = std::move(outcome.details);
+    if (!usable_status(p.status) || p.simulated.rows() < 2) return;
+    try {
+      compare(measured[i], p, config.objective_options);
+    } catch (const std::exception& e) {
+      p.status = "failed";
+      p.message = std::string("comparison with the measured curve failed: ") + e.what();
+    }
+  };
+  if (config.backend.type == "command") {
+    predict_through_command(config, values, options, compare_case);
+    return out;
+  }
+  std::vector<dem::Scene> scenes;
   for (std::size_t i = 0; i < config.cases.size(); ++i) {
     const auto& c = config.cases[i];
     const std::string where = config.source + ": cases[" + std::to_string(i) + "].scene";
@@ -133,29 +216,10 @@ std::vector<CasePrediction> predict_cases(const CampaignConfig& config, const st
       }
     }
     scenes.push_back(std::move(scene));
-    measured.push_back(load_measured(c.measured));
   }
-
-  std::vector<CasePrediction> out(config.cases.size());
   run_pool(
       config.cases.size(), options.threads > 0 ? options.threads : hardware_threads(),
-      [&](std::size_t i) { return simulate_with_parameters(scenes[i], values); },
-      [&](std::size_t i, SimulationOutcome&& outcome) {
-        CasePrediction& p = out[i];
-        p.name = config.cases[i].name;
-        p.status = outcome.status;
-        p.message = outcome.message;
-        p.simulated = std::move(outcome.curves);
-        p.wall_time_s = outcome.wall_time_s;
-        p.details = std::move(outcome.details);
-        if (!usable_status(p.status) || p.simulated.rows() < 2) return;
-        try {
-          compare(measured[i], p, config.objective_options);
-        } catch (const std::exception& e) {
-          p.status = "failed";
-          p.message = std::string("comparison with the measured curve failed: ") + e.what();
-        }
-      });
+      [&](std::size_t i) { return simulate_with_parameters(scenes[i], values); }, compare_case);
   return out;
 }
 

@@ -43,6 +43,7 @@ void run(const PredictFlags& f) {
   if (params.empty()) throw CampaignError("no parameters: give --result result.json or --param NAME=VALUE");
   PredictionOptions options;
   options.threads = f.threads;
+  options.work_folder = f.out;  // an external command's run folders: DIR/runs
   const auto cases = predict_cases(config, params, options);
 
   std::cout << "case            status     peak measured  peak simulated  peak error  RMS error  objective 1\n";
@@ -78,7 +79,8 @@ void setup(CLI::App& app) {
       ->check(CLI::ExistingFile);
   sub->add_option("--param", flags->params, "NAME=VALUE (SI, friction_deg in degrees); overrides --result");
   sub->add_option("--out", flags->out, "Folder for prediction.json and the simulated curves (<case>.csv)");
-  sub->add_option("--threads", flags->threads, "Simulations at once (0 = every core)");
+  sub->add_option("--threads", flags->threads,
+                  "Simulations at once (0 = every core, or the campaign's backend.parallel for an external command)");
   sub->callback([flags] { run(*flags); });
 }
 

@@ -4,9 +4,13 @@
 #include "test_support.hpp"
 #include "demcal/pipelines/backend.hpp"
 #include "demcal/pipelines/campaign.hpp"
+#include "demcal/pipelines/diagnose.hpp"
+#include "demcal/pipelines/predict.hpp"
 #include "demcal/pipelines/process.hpp"
 
 #include <gtest/gtest.h>
+
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -91,6 +95,64 @@ TEST(Campaign, ExternalCommandCalibrationRecoversTheHiddenParameters) {
   EXPECT_EQ(again.top.size(), result.top.size());
   EXPECT_EQ(again.best.fitness, result.best.fitness);
   EXPECT_EQ(again.best.params, result.best.params);
+}
+
+// A prediction of a campaign that runs an external command runs that command (not the engine):
+// the measurement's own parameters reproduce it to its noise, the run folders go under the work
+// folder or a temporary one that is removed, and a parameter the command takes but the set lacks
+// is named. A diagnosis, which switches effects on in scene files, refuses a command without {scene}.
+TEST(Campaign, PredictionRunsTheExternalCommand) {
+  const auto dir = fresh_dir("predict");
+  const CampaignConfig config = campaign_from_json(toy_campaign(dir), dir.string(), "toy.json");
+  PredictionOptions options;
+  options.work_folder = (dir / "predicted").string();
+  const auto cases = predict_cases(config, {{"k", 2e7}, {"friction_deg", 32}}, options);
+  ASSERT_EQ(cases.size(), 1u);
+  ASSERT_TRUE(cases[0].ok()) << cases[0].status << ": " << cases[0].message;
+  EXPECT_LT(cases[0].rms_error, 40);  // the measurement's noise is 20 N
+  EXPECT_NEAR(cases[0].peak_error, 0, 0.01);
+  EXPECT_TRUE(fs::is_directory(dir / "predicted" / "runs"));
+  // far from the measurement's parameters, far from its curve
+  const auto off = predict_cases(config, {{"k", 2e6}, {"friction_deg", 40}}, options);
+  ASSERT_TRUE(off[0].ok()) << off[0].message;
+  EXPECT_GT(off[0].rms_error, 10 * cases[0].rms_error);
+
+  const auto leftovers = [] {
+    int n = 0;
+    for (const auto& e : fs::directory_iterator(fs::temp_directory_path()))
+      n += e.path().filename().string().rfind("demcal-predict-" + std::to_string(::getpid()) + "-", 0) == 0;
+    return n;
+  };
+  EXPECT_TRUE(predict_cases(config, {{"k", 2e7}, {"friction_deg", 32}})[0].ok());
+  EXPECT_EQ(leftovers(), 0);
+
+  try {
+    predict_cases(config, {{"k", 2e7}});
+    ADD_FAILURE() << "a set without friction_deg was accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_NE(std::string(e.what()).find("backend.command takes {friction_deg}, which the parameter set does not give"),
+              std::string::npos)
+        << e.what();
+  }
+
+  DiagnoseOptions diagnose;
+  diagnose.output = (dir / "diagnosis").string();
+  diagnose.progress = false;
+  try {
+    run_diagnosis(config, diagnose);
+    ADD_FAILURE() << "a command without {scene} was accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_NE(std::string(e.what()).find("backend.command has no {scene}"), std::string::npos) << e.what();
+  }
+  auto with_scene = toy_campaign(dir);
+  with_scene["backend"]["command"] = with_scene["backend"]["command"].get<std::string>() + " {scene}";
+  try {
+    run_diagnosis(campaign_from_json(with_scene, dir.string(), "toy.json"), diagnose);
+    ADD_FAILURE() << "a case without a scene file was accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_NE(std::string(e.what()).find("case 'main' has no scene file"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "diagnosis" / "archive.sqlite")) << "simulated before the check";
 }
 
 TEST(Campaign, HangingAndCrashingRunsAreMarkedFailedAndTheCampaignGoesOn) {

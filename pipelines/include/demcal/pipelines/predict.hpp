@@ -8,7 +8,8 @@
 //   auto report = predict_cases(config, params);   // one CasePrediction per case
 //
 // The campaign's `parameters` bounds and `optimiser` are not used; its cases (scene + measured
-// curve + column mapping), objective points and channel weights are. Fixed parameters of the
+// curve + column mapping), objective points and channel weights are, and its backend when that is
+// an external command (the engine otherwise). Fixed parameters of the
 // campaign fill names the given set lacks, and a tied parameter is derived from its source when
 // absent. Errors are measured in the force unit of the engine (N) and displacements in m.
 #pragma once
@@ -28,7 +29,12 @@
 namespace demcal::pipelines {
 
 struct PredictionOptions {
-  int threads = 0;  // simulations at once; <= 0 = every hardware thread
+  int threads = 0;  // simulations at once; <= 0 = the campaign backend's own count (every hardware
+                    // thread for the engine, backend.parallel for an external command)
+  // A campaign whose backend is an external command (`"backend": {"type": "command"}`) predicts
+  // through that command, one run per case: the folder its per-run folders are made under ("" = a
+  // temporary folder, removed afterwards). Other campaigns run the built-in engine.
+  std::string work_folder;
 };
 
 // One case simulated with the given parameters, against its measured curve.
