@@ -1005,16 +1005,12 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   const auto start = std::chrono::steady_clock::now();
   config.Validate();
   options.Validate();
-  // The effects are switched on in each case's scene file: an external command must be given it.
-  if (config.backend.type == "command") {
-    if (config.backend.command.find("{scene}") == std::string::npos)
-      throw CampaignError(config.source + ": backend.command has no {scene}: the diagnosis switches effects on in each "
-                          "case's scene file, which this command would never read");
-    for (const auto& c : config.cases)
-      if (c.scene.file.empty())
-        throw CampaignError(config.source + ": case '" + c.name + "' has no scene file: with an external command the "
-                            "diagnosis switches effects on in the scene file the command receives as {scene}");
-  }
+  // The effects are switched on in each case's scene and calibrated with their parameters, which
+  // only the engine's backends set; an external command receives the campaign's own placeholders.
+  if (config.backend.type == "command")
+    throw CampaignError(config.source + ": backend.type is \"command\": the diagnosis switches effects on in demcal's "
+                        "engine and calibrates their parameters, which an external command never receives; diagnose "
+                        "with the \"threads\" or \"mpi\" backend (the scene and parameters of this campaign in demcal)");
   for (const auto& name : options.held_out_cases)
     if (std::none_of(config.cases.begin(), config.cases.end(), [&](const CaseSpec& c) { return c.name == name; }))
       throw CampaignError("--held-out: the campaign has no case named '" + name + "'");
