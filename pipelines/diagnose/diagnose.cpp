@@ -1010,7 +1010,10 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   if (config.backend.type == "command")
     throw CampaignError(config.source + ": backend.type is \"command\": the diagnosis switches effects on in demcal's "
                         "engine and calibrates their parameters, which an external command never receives; diagnose "
-                        "with the \"threads\" or \"mpi\" backend (the scene and parameters of this campaign in demcal)");
+                        "with the \"threads\" backend (the scene and parameters of this campaign in demcal)");
+  if (config.backend.type == "mpi")
+    throw CampaignError(config.source + ": backend.type is \"mpi\": the diagnosis runs on this machine's threads (the "
+                        "MPI backend gives the same results); set backend.type to \"threads\"");
   for (const auto& name : options.held_out_cases)
     if (std::none_of(config.cases.begin(), config.cases.end(), [&](const CaseSpec& c) { return c.name == name; }))
       throw CampaignError("--held-out: the campaign has no case named '" + name + "'");

@@ -678,7 +678,8 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
 }
 
 // A base calibration reused with --result must be one of the campaign's parameters: otherwise the
-// diagnosis stops before any simulation, naming the file, the parameter and the values.
+// diagnosis stops before any simulation, naming the file, the parameter and the values. So does a
+// campaign on the MPI backend (the diagnosis runs on threads).
 TEST(Diagnose, ABaseResultOfOtherParametersIsRefused) {
   const fs::path dir = test_support::fresh_dir("diagnose", "foreign-result");
   smoothing::Curve m;
@@ -716,6 +717,19 @@ TEST(Diagnose, ABaseResultOfOtherParametersIsRefused) {
     }
     EXPECT_FALSE(fs::exists(dir / "out" / "archive.sqlite")) << "simulated before the check";
   }
+  // the MPI backend: the diagnosis runs on this machine's threads and says so
+  json mpi = campaign;
+  mpi["backend"] = {{"type", "mpi"}};
+  DiagnoseOptions o;
+  o.output = (dir / "out").string();
+  o.progress = false;
+  try {
+    run_diagnosis(campaign_from_json(mpi, dir.string(), "foreign-result.json"), o);
+    ADD_FAILURE() << "a diagnosis on the MPI backend was accepted";
+  } catch (const CampaignError& e) {
+    EXPECT_NE(std::string(e.what()).find("backend.type is \"mpi\""), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "out" / "archive.sqlite")) << "simulated before the check";
 }
 
 // ---- the loop on engine-made data -------------------------------------------------------------
