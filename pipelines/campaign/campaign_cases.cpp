@@ -113,26 +113,31 @@ std::vector<CaseCurveGrid> campaign_curve_grids(const CampaignConfig& config) {
 
 namespace demcal::pipelines::detail {
 
+std::unique_ptr<CommandBackend> make_command_backend(const CampaignConfig& config, const std::string& work_root,
+                                                     std::vector<std::string> parameter_names, int parallel) {
+  CommandBackendOptions o;
+  o.command = config.backend.command;
+  o.timeout_s = config.backend.timeout_s;
+  o.parallel = parallel;
+  o.max_output_bytes = static_cast<long long>(config.backend.max_output_mb * 1024 * 1024);
+  o.work_root = work_root;
+  for (const auto& c : config.cases) {
+    o.case_names.push_back(c.name);
+    o.scene_files.push_back(c.scene.file);
+  }
+  o.parameter_names = std::move(parameter_names);
+  try {
+    return std::make_unique<CommandBackend>(o);
+  } catch (const std::invalid_argument& e) {
+    throw CampaignError(config.source + ": backend.command: " + e.what());
+  }
+}
+
 std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, const PreparedCases& prepared,
                                                 const RunOptions& options) {
-  if (config.backend.type == "command") {
-    CommandBackendOptions o;
-    o.command = config.backend.command;
-    o.timeout_s = config.backend.timeout_s;
-    o.parallel = config.backend.parallel;
-    o.max_output_bytes = static_cast<long long>(config.backend.max_output_mb * 1024 * 1024);
-    o.work_root = (fs::path(config.output) / "runs").string();
-    for (const auto& c : config.cases) {
-      o.case_names.push_back(c.name);
-      o.scene_files.push_back(c.scene.file);
-    }
-    o.parameter_names = all_parameter_names(config.space);
-    try {
-      return std::make_unique<CommandBackend>(o);
-    } catch (const std::invalid_argument& e) {
-      throw CampaignError(config.source + ": backend.command: " + e.what());
-    }
-  }
+  if (config.backend.type == "command")
+    return make_command_backend(config, (fs::path(config.output) / "runs").string(), all_parameter_names(config.space),
+                                config.backend.parallel);
   if (config.backend.type == "mpi") {
     if (!mpi_compiled()) throw CampaignError("this demcal was built without MPI; use --backend threads");
     if (options.mpi_size < 1) throw CampaignError("--backend mpi must run under mpirun");

@@ -13,7 +13,6 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <memory>
 #include <tuple>
 
 namespace demcal::pipelines {
@@ -61,52 +60,38 @@ void compare(const smoothing::Curve& measured, CasePrediction& p, const smoothin
 void predict_through_command(const CampaignConfig& config, const std::map<std::string, double>& values,
                              const PredictionOptions& options, const OutcomeCallback& done) {
   namespace fs = std::filesystem;
-  CommandBackendOptions o;
-  o.command = config.backend.command;
-  o.timeout_s = config.backend.timeout_s;
-  o.parallel = options.threads > 0 ? options.threads : config.backend.parallel;
-  o.max_output_bytes = static_cast<long long>(config.backend.max_output_mb * 1024 * 1024);
-  fs::path temporary;
-  if (options.work_folder.empty()) {
-    // a folder of its own: the process id and a counter keep concurrent predictions apart
-    static std::atomic<unsigned> counter{0};
-    temporary = fs::temp_directory_path() /
-                ("demcal-predict-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-    fs::create_directories(temporary);
-    o.work_root = temporary.string();
-  } else {
-    o.work_root = (fs::path(options.work_folder) / "runs").string();
-  }
-  for (const auto& c : config.cases) {
-    o.case_names.push_back(c.name);
-    o.scene_files.push_back(c.scene.file);
-  }
-  for (const auto& [name, value] : values) o.parameter_names.push_back(name);
   // a placeholder the set does not give is a missing parameter here, not a bad template
   std::vector<std::string> names;
   try {
-    names = placeholder_names(split_command_line(o.command));
+    names = placeholder_names(split_command_line(config.backend.command));
   } catch (const std::invalid_argument& e) {
     throw CampaignError(config.source + ": backend.command: " + e.what());
   }
   for (const auto& name : names)
     if (name != "output" && name != "workdir" && name != "case" && name != "scene" && !values.count(name))
       throw CampaignError(config.source + ": backend.command takes {" + name + "}, which the parameter set does not give");
+  struct RemovedAfter {  // the temporary folder, removed however the runs end
+    fs::path path;
+    ~RemovedAfter() {
+      std::error_code ignored;
+      if (!path.empty()) fs::remove_all(path, ignored);
+    }
+  } temporary;
+  fs::path work_root = fs::path(options.work_folder) / "runs";
+  if (options.work_folder.empty()) {
+    // a folder of its own: the process id and a counter keep concurrent predictions apart
+    static std::atomic<unsigned> counter{0};
+    temporary.path = fs::temp_directory_path() /
+                     ("demcal-predict-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+    work_root = temporary.path;
+  }
+  std::vector<std::string> parameter_names;
+  for (const auto& [name, value] : values) parameter_names.push_back(name);
+  const auto backend = detail::make_command_backend(config, work_root.string(), parameter_names,
+                                                    options.threads > 0 ? options.threads : config.backend.parallel);
   std::vector<SimulationTask> tasks;
   for (std::size_t i = 0; i < config.cases.size(); ++i) tasks.push_back({i, values});
-  try {
-    std::unique_ptr<CommandBackend> backend;
-    try {
-      backend = std::make_unique<CommandBackend>(o);
-    } catch (const std::invalid_argument& e) {
-      throw CampaignError(config.source + ": backend.command: " + e.what());
-    }
-    backend->run(tasks, done);
-  } catch (...) {
-    if (!temporary.empty()) fs::remove_all(temporary);
-    throw;
-  }
-  if (!temporary.empty()) fs::remove_all(temporary);
+  backend->run(tasks, done);
 }
 
 }  // namespace

@@ -134,6 +134,7 @@ TEST(Campaign, PredictionRunsTheExternalCommand) {
               std::string::npos)
         << e.what();
   }
+  EXPECT_EQ(leftovers(), 0);
 
   DiagnoseOptions diagnose;
   diagnose.output = (dir / "diagnosis").string();
