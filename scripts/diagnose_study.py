@@ -2,7 +2,9 @@
 """The goal study of `demcal diagnose` (docs/diagnose.md): for every hidden effect and a control
 with none, measurements made by the engine with parameters the diagnosis is not told plus force
 noise, one diagnosis per noise seed; then the table of how often the right effect was named, how
-well its parameters came back, and how far the error fell.
+well its parameters came back (within 25 %, and inside the bounds the diagnosis states), how far
+the error fell (3 x, or to the level at which the loop calls a fit explained), and how often all
+three parts of the goal held at once.
 
 usage: diagnose_study.py DEMCAL_BINARY OUT_DIR [--cases none,support-compliance,...] [--seeds 5] [--first-seed 1]
                          [--velocity 0.001] [--contacts-per-joint 5] [--max-displacement 0.008]
@@ -129,10 +131,44 @@ def recovered(diagnosis, case, magnitude):
     return None
 
 
+def bounded(diagnosis, case, magnitude):
+    """Whether every hidden parameter lies inside the bounds the diagnosis states for the chosen fit
+    (step 7; a side without a bound is open). None: the effect was not chosen."""
+    _, truth = hidden_effect(case, magnitude)
+    for c in diagnosis["candidates"]:
+        if c["effect"] != case or c["verdict"] != "accepted":
+            continue
+        bounds = c.get("bounds", {})
+        for suffix, value in truth.items():
+            found = [b for k, b in bounds.items() if k.split(".")[-1] == suffix]
+            if not found:
+                return False
+            lower = found[0]["lower"] if found[0]["lower"] is not None else -math.inf
+            upper = found[0]["upper"] if found[0]["upper"] is not None else math.inf
+            if not lower <= value <= upper:
+                return False
+        return True
+    return None
+
+
+def error_goal(diagnosis, ratio=1.25, scatter_floor_ratio=1.0):
+    """The goal's error part: the error after at most a third of the error before, or at most the
+    level at which the loop calls a fit explained (ratio x the noise and the simulation's scatter,
+    the scatter counted up to scatter_floor_ratio x the noise: demcal's defaults)."""
+    def rms(values):
+        v = [x for x in values if x is not None and math.isfinite(x)]
+        return math.sqrt(sum(x * x for x in v) / len(v)) if v else 0.0
+    noise, scatter = rms(diagnosis["noise"].values()), rms(diagnosis.get("scatter", {}).values())
+    floor = math.hypot(noise, min(scatter, scatter_floor_ratio * noise))
+    before, after = diagnosis["error_before"], diagnosis["error_after"]
+    return after <= before / 3 or after <= ratio * floor
+
+
 def summarise(rows):
     table = ["| hidden effect | seeds | right verdict | effect named (seeds) | parameters within 25 % | "
+             "truth within the stated bounds | error 3 x lower or at the floor | all three parts of the goal | "
              "error before / after (median, N) | after / before | noise (median, N) | simulations (median) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     by_case = {}
     for r in rows:
         by_case.setdefault(r["case"], []).append(r)
@@ -143,8 +179,12 @@ def summarise(rows):
         right = sum(1 for r in rs if r["right"])
         within = sum(1 for r in rs if r["recovery"] is not None and r["recovery"] <= 0.25)
         named = ", ".join("/".join(r["chosen"]) or "none" for r in rs)
-        table.append("| %s | %d | **%d/%d** | %s | %s | %.0f / %.0f | %.2f | %.0f | %.0f |" % (
-            case, len(rs), right, len(rs), named, "-" if case == "none" else "%d/%d" % (within, len(rs)),
+        in_bounds = sum(1 for r in rs if r["right"] and r.get("bounded"))
+        error_met = sum(1 for r in rs if r["right"] and r.get("error_goal"))
+        goal = sum(1 for r in rs if r["right"] and (case == "none" or (r.get("bounded") and r.get("error_goal"))))
+        count = lambda n: "-" if case == "none" else "%d/%d" % (n, len(rs))
+        table.append("| %s | %d | **%d/%d** | %s | %s | %s | %s | **%d/%d** | %.0f / %.0f | %.2f | %.0f | %.0f |" % (
+            case, len(rs), right, len(rs), named, count(within), count(in_bounds), count(error_met), goal, len(rs),
             median("before"), median("after"), median("ratio"), median("noise"), median("simulations")))
     return "\n".join(table)
 
@@ -201,7 +241,8 @@ def main():
             before, after = d["error_before"], d["error_after"]
             noise = math.sqrt(sum(v * v for v in d["noise"].values()) / max(1, len(d["noise"])))
             rows.append({"case": case, "seed": seed, "chosen": chosen, "right": right,
-                         "recovery": recovered(d, case, args.magnitude), "before": before, "after": after,
+                         "recovery": recovered(d, case, args.magnitude), "bounded": bounded(d, case, args.magnitude),
+                         "error_goal": error_goal(d), "before": before, "after": after,
                          "ratio": after / before if before else float("nan"), "noise": noise,
                          "simulations": d["simulations"], "verdict": d["verdict"]})
             print("%s seed %d: chosen %s, error %.0f -> %.0f N" % (case, seed, chosen or "none", before, after),
