@@ -41,8 +41,8 @@ std::shared_ptr<const CurveGrid> case_curve_grid(const CampaignConfig& config, c
 std::vector<dem::Scene> build_scenes(const CampaignConfig& config);
 std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, const PreparedCases& prepared,
                                                 const RunOptions& options);
-// The campaign's external command as backend options (template, timeout, parallel runs, output
-// limit, each case's name and scene file), its per-run folders under `work_root`; the parameter
+// The campaign's external command as a backend (its template, timeout, output limit, each
+// case's name and scene file), `parallel` runs at once, per-run folders under `work_root`; the parameter
 // names are the caller's. Throws CampaignError naming backend.command when the template is bad.
 std::unique_ptr<CommandBackend> make_command_backend(const CampaignConfig& config, const std::string& work_root,
                                                      std::vector<std::string> parameter_names, int parallel);
