@@ -158,23 +158,23 @@ void ThreadBackend::run(const std::vector<SimulationTask>& tasks, const OutcomeC
 
 // ---- external command ------------------------------------------------------------------------
 
+std::vector<std::string> command_parameter_placeholders(const std::string& command) {
+  std::vector<std::string> names;
+  for (const auto& name : placeholder_names(split_command_line(command)))
+    if (name != "output" && name != "workdir" && name != "case" && name != "scene") names.push_back(name);
+  return names;
+}
+
 void CommandBackendOptions::Validate() const {
-  const auto words = split_command_line(command);
-  const auto names = placeholder_names(words);
-  bool has_output = false;
-  for (const auto& name : names) {
-    if (name == "output") {
-      has_output = true;
-      continue;
-    }
-    if (name == "workdir" || name == "case" || name == "scene") continue;
+  for (const auto& name : command_parameter_placeholders(command)) {
     if (std::find(parameter_names.begin(), parameter_names.end(), name) == parameter_names.end()) {
       std::string known = "output, workdir, case, scene";
       for (const auto& p : parameter_names) known += ", " + p;
       throw std::invalid_argument("command template: unknown placeholder {" + name + "} (known: " + known + ")");
     }
   }
-  if (!has_output)
+  const auto names = placeholder_names(split_command_line(command));
+  if (std::find(names.begin(), names.end(), "output") == names.end())
     throw std::invalid_argument("command template must contain {output} (the CSV the program writes): " + command);
   if (!(timeout_s >= 0)) throw std::invalid_argument("command timeout must be >= 0 s, got " + std::to_string(timeout_s));
   if (work_root.empty()) throw std::invalid_argument("command backend: empty work_root");

@@ -3,7 +3,6 @@
 #include "campaign_internal.hpp"
 
 #include "demcal/pipelines/backend.hpp"
-#include "demcal/pipelines/process.hpp"
 #include "demcal/smoothing/objective.hpp"
 
 #include <unistd.h>
@@ -63,12 +62,12 @@ void predict_through_command(const CampaignConfig& config, const std::map<std::s
   // a placeholder the set does not give is a missing parameter here, not a bad template
   std::vector<std::string> names;
   try {
-    names = placeholder_names(split_command_line(config.backend.command));
+    names = command_parameter_placeholders(config.backend.command);
   } catch (const std::invalid_argument& e) {
     throw CampaignError(config.source + ": backend.command: " + e.what());
   }
   for (const auto& name : names)
-    if (name != "output" && name != "workdir" && name != "case" && name != "scene" && !values.count(name))
+    if (!values.count(name))
       throw CampaignError(config.source + ": backend.command takes {" + name + "}, which the parameter set does not give");
   struct RemovedAfter {  // the temporary folder, removed however the runs end
     fs::path path;

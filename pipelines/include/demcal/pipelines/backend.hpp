@@ -110,6 +110,11 @@ struct CommandBackendOptions {
   void Validate() const;
 };
 
+// The placeholders of a command template that name parameters: all but {output}, {workdir},
+// {case} and {scene}, in order of first appearance. Throws std::invalid_argument as
+// split_command_line does.
+std::vector<std::string> command_parameter_placeholders(const std::string& command);
+
 class CommandBackend : public EvaluationBackend {
  public:
   explicit CommandBackend(CommandBackendOptions options);
