@@ -74,6 +74,10 @@ void setup(CLI::App& app) {
                                    "Effects calibrated at most where the base fit's re-runs scatter by more than the noise "
                                    "(0 = every effect; default: every effect, or --candidates when given)");
   sub->add_option("--candidate-simulations", o.candidate_evaluations, "Simulations per candidate calibration (0 = the campaign's)");
+  sub->add_option("--continued-simulations", o.continued_evaluations,
+                  "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter "
+                  "(-1 = a candidate's budget, 0 = none)")
+      ->capture_default_str();
   sub->add_option("--candidate-algorithm", o.candidate_algorithm,
                   "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
   sub->add_option("--surrogate-kind", o.surrogate_kind, "Surrogate of the refinement's and candidates' searches: gp | mlp")

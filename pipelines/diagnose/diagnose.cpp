@@ -39,6 +39,8 @@ void DiagnoseOptions::Validate() const {
   if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
   if (profile_evaluations < 0) fail("profile_evaluations", std::to_string(profile_evaluations), "must be >= 0");
+  if (continued_evaluations < -1)
+    fail("continued_evaluations", std::to_string(continued_evaluations), "must be >= 0 (-1: a candidate's budget)");
   if (scatter_runs < 0) fail("scatter_runs", std::to_string(scatter_runs), "must be >= 0");
   if (!(scatter_floor_ratio > 0)) fail("scatter_floor_ratio", std::to_string(scatter_floor_ratio), "must be > 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
@@ -699,6 +701,47 @@ std::vector<double> score_candidates(Diagnosis& d) {
   return points;
 }
 
+// The extended calibration of one candidate: base + its effect into `folder`, at most `budget`
+// simulations, warm-started at `warm`; its best set (into `best_set`, on every case) re-run and the
+// fit judged on the run of median error, since the best of many runs of a model that slips or snaps
+// may be a lucky one. Sets the fit's fields of `c` (its simulations added); false, with `c.reason`,
+// when the best set cannot be re-simulated. Throws what run_campaign throws.
+bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best_set, const ExtendedModel& m,
+                         const CampaignConfig& config, const std::map<std::string, double>& base_params,
+                         const DiagnoseOptions& options, long budget, const fs::path& folder,
+                         const std::map<std::string, double>& warm, const std::vector<ChannelResidual>& base_residuals,
+                         CaseRunner& runner) {
+  const CampaignConfig ext = extended_campaign(m, config, base_params, options, budget, folder, warm);
+  for (const auto& p : ext.space.free_parameters())  // the calibration's own box (its residual friction capped lower)
+    if (c.search_ranges.count(p.name)) c.search_ranges[p.name] = {p.lower, p.upper};
+  RunOptions run;
+  run.resume = options.resume;
+  run.progress = options.progress;
+  const CampaignResult r = run_campaign(ext, run);
+  runner.add_campaign(r);
+  c.simulations += r.simulations;
+  c.params = r.best.params;
+  c.fitness = r.best.fitness;
+  best_set = complete_parameters(ext, r.best.params);
+  const std::vector<Evaluation> runs = runs_with_reruns(m.config, ext, best_set, &base_residuals, options.scatter_runs, runner);
+  if (!runs.front().ok) {
+    c.reason = "its best set cannot be re-simulated: " + runs.front().message;
+    return false;
+  }
+  c.rerun_errors.clear();
+  for (const auto& one : runs) c.rerun_errors.push_back(one.error);
+  const Evaluation& e = median_run(runs);
+  c.residuals = e.residuals;
+  c.error = e.error;
+  c.rms.clear();
+  for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
+  c.held_out_rms.clear();
+  for (const auto& ch : e.held_out) c.held_out_rms[key_of(ch)] = ch.rms;
+  c.held_out_error = e.held_out_error;
+  c.effect_parameters = static_cast<int>(m.parameter_names.size());
+  return true;
+}
+
 }  // namespace
 
 void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
@@ -1057,6 +1100,11 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     }
   }
   const auto base_params = complete_parameters(config, d.base_params);
+  // A calibration's budget within a total one: room is left for its best set's run and re-runs.
+  const auto within_budget = [&](long wanted) {
+    if (options.max_simulations <= 0) return wanted;
+    return std::min(wanted, options.max_simulations - runner.simulations() - (1 + options.scatter_runs));
+  };
 
   // 2. residual, of the base best set judged like every candidate: on the run of median error among
   // it and its re-runs, which also measure the simulation's own scatter
@@ -1191,49 +1239,18 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         c.reason = "ranked below the " + std::to_string(limit) + " effects tried";
         continue;
       }
-      long budget = per_candidate;
-      // within a total budget, room is left for the best set's run and re-runs after the calibration
-      if (options.max_simulations > 0)
-        budget = std::min(budget, options.max_simulations - runner.simulations() - (1 + options.scatter_runs));
+      const long budget = within_budget(per_candidate);
       if (budget < 2 * config.optimiser.population) {
         c.reason = "over the simulation budget";
         continue;
       }
-      const ExtendedModel& m = models.at(c.effect);
       const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
-      const CampaignConfig ext = extended_campaign(m, config, d.base_params, options, budget, folder, warm_starts[c.effect]);
-      for (const auto& p : ext.space.free_parameters())  // the calibration's own box (its residual friction capped lower)
-        if (c.search_ranges.count(p.name)) c.search_ranges[p.name] = {p.lower, p.upper};
       progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations) in " + folder.string());
       ++tried;
       c.tried = true;
-      RunOptions run;
-      run.resume = options.resume;
-      run.progress = options.progress;
       try {
-        const CampaignResult r = run_campaign(ext, run);
-        runner.add_campaign(r);
-        c.simulations = r.simulations;
-        c.params = r.best.params;
-        c.fitness = r.best.fitness;
-        // on every case, the held-out ones included: the fit is judged on the data it did not use too
-        best_sets[c.effect] = complete_parameters(ext, r.best.params);
-        // The best of many runs of a model that slips or snaps may be a lucky one: judged on the
-        // median of the best set's run and its re-runs.
-        const std::vector<Evaluation> runs =
-            runs_with_reruns(m.config, ext, best_sets[c.effect], &base.residuals, options.scatter_runs, runner);
-        if (!runs.front().ok) {
-          c.reason = "its best set cannot be re-simulated: " + runs.front().message;
-          continue;
-        }
-        for (const auto& run : runs) c.rerun_errors.push_back(run.error);
-        const Evaluation& e = median_run(runs);
-        c.residuals = e.residuals;
-        c.error = e.error;
-        for (const auto& ch : e.residuals) c.rms[key_of(ch)] = ch.rms;
-        for (const auto& ch : e.held_out) c.held_out_rms[key_of(ch)] = ch.rms;
-        c.held_out_error = e.held_out_error;
-        c.effect_parameters = static_cast<int>(m.parameter_names.size());
+        calibrate_candidate(c, best_sets[c.effect], models.at(c.effect), config, d.base_params, options, budget, folder,
+                            warm_starts[c.effect], base.residuals, runner);
       } catch (const std::exception& ex) {
         c.reason = std::string("its calibration failed: ") + ex.what();
       }
@@ -1241,7 +1258,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   }
 
   // 5. selection
-  const std::vector<double> effective_points = score_candidates(d);
+  std::vector<double> effective_points = score_candidates(d);
   if (at_noise) {
     d.error_after = d.error_before;
     d.verdict = "No effect needed: the base fit is already within the measurement noise and the simulation's own "
@@ -1249,6 +1266,46 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
                 " N, scatter of the simulated curve about " + format_number(scatter) + " N)." + unfitted_data_note(d);
   } else {
     select_effect(d, options);
+    // 5b. the chosen effect's search continued while its fit stays above the floor: the search, not
+    // the effect, may be what leaves the error there (a stiffness whose truth is a narrow valley).
+    const double explained = options.noise_level_ratio * error_floor(noise, scatter, options);
+    const long continued_budget = options.continued_evaluations < 0 ? per_candidate : options.continued_evaluations;
+    for (auto& c : d.candidates) {
+      if (c.verdict != "accepted" || !(c.error > explained) || !models.count(c.effect)) continue;
+      const long budget = within_budget(continued_budget);
+      if (budget < 2 * config.optimiser.population) break;
+      const fs::path folder = fs::path(options.output) / "candidates" / (c.effect + "-continued");
+      progress(options, c.effect + "'s fit stays above the noise and scatter (" + format_number(c.error) + " against " +
+                            format_number(explained) + " N): its search continued (" + std::to_string(budget) +
+                            " simulations) in " + folder.string());
+      EffectCandidate next = c;
+      next.simulations = 0;
+      next.error = EffectCandidate::kNaN;  // stays NaN when the further search fails
+      std::map<std::string, double> next_set;
+      // another seed: a search of its own (and campaign of its own in the archive), whose surrogate
+      // trains on the first search's runs
+      ExtendedModel further = models.at(c.effect);
+      further.config.optimiser.seed += 1;
+      try {
+        calibrate_candidate(next, next_set, further, config, d.base_params, options, budget, folder,
+                            best_sets.at(c.effect), base.residuals, runner);
+      } catch (const std::exception& ex) {
+        progress(options, "the continued search of " + c.effect + " failed: " + ex.what());
+      }
+      ContinuedSearch continued{next.simulations, c.error, next.error, next.error < c.error};
+      if (continued.kept) {
+        next.simulations += c.simulations;
+        c = std::move(next);
+        best_sets[c.effect] = next_set;
+      } else {
+        c.simulations += continued.simulations;
+      }
+      c.continued = continued;
+      effective_points = score_candidates(d);
+      select_effect(d, options);
+    }
+    for (const auto& c : d.candidates)
+      if (c.continued.simulations > 0) d.verdict += " " + c.continued.describe(c.effect);
     if (options.bound_parameters) {
       std::vector<std::string> bounds;  // of the chosen effect, for the verdict
       for (auto& c : d.candidates) {
@@ -1281,6 +1338,20 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   return d;
 }
 
+std::string ContinuedSearch::describe(const std::string& effect) const {
+  const std::string head = "Its fit above the noise and scatter, " + effect + " was searched " +
+                           std::to_string(simulations) + " simulations further";
+  if (kept) return head + ", which lowered its error from " + format_number(error_before) + " to " + format_number(error_found) + " N.";
+  if (!std::isfinite(error_found)) return head + "; that search failed, and the first fit stands.";
+  return head + " without a closer fit (" + format_number(error_found) + " N against " + format_number(error_before) +
+         " N); the first fit stands.";
+}
+
+json ContinuedSearch::to_json() const {
+  return {{"simulations", simulations}, {"error_before", finite_or_null(error_before)},
+          {"error_found", finite_or_null(error_found)}, {"kept", kept}};
+}
+
 json Diagnosis::to_json() const {
   json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)},
                {"rerun_errors", base_rerun_errors}};
@@ -1310,6 +1381,7 @@ json Diagnosis::to_json() const {
     json ranges = json::object();
     for (const auto& [name, range] : c.search_ranges) ranges[name] = {range[0], range[1]};
     cands.back()["search_ranges"] = ranges;
+    if (c.continued.simulations > 0) cands.back()["continued"] = c.continued.to_json();
     if (!c.bounds.empty()) {
       json bounds = json::object();
       for (const auto& b : c.bounds) bounds[b.name] = b.to_json();

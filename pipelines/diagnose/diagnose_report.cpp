@@ -167,6 +167,7 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
       md.seekp(-1, std::ios_base::cur);
       md << ".\n\n";
     }
+    if (c.continued.simulations > 0) md << c.continued.describe(c.effect) << "\n\n";
     if (c.bounds.empty()) continue;
     md << "How tightly the data pin the effect's parameters: each moved from the best set, the other free "
           "parameters re-fitted where the move alone fits worse (marked *); a value is ruled out when the criterion "

@@ -675,6 +675,9 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   o.max_candidates = 1;
   o.profile_evaluations = -1;
   expect_rejected(o, "profile_evaluations = -1", "a negative re-fit budget");
+  o.profile_evaluations = 20;
+  o.continued_evaluations = -2;
+  expect_rejected(o, "continued_evaluations = -2", "a further search's budget below -1");
 }
 
 // A base calibration reused with --result must be one of the campaign's parameters: otherwise the
@@ -1124,4 +1127,70 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
     d->erase("session");
   }
   EXPECT_EQ(resumed, whole) << "the resumed diagnosis differs from the uninterrupted one: " << json::diff(whole, resumed).dump();
+}
+
+// An accepted effect whose fit stays above the error floor is searched further (its calibration
+// continued on every archived run of it), and the closer of the two fits is the diagnosis's; one
+// that needs none, and --continued-simulations 0, run no further search.
+TEST(DiagnoseLoop, AnAcceptedFitAboveTheFloorIsSearchedFurther) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "continued");
+  const dem::ArchOptions arch = cli_arch();
+  const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, arch);
+  const json j = {{"name", "continued"},
+                  {"scene", {{"generator", "arch"},
+                             {"options", {{"contacts_per_joint", arch.contacts_per_joint}, {"velocity", arch.velocity},
+                                          {"max_displacement", arch.max_displacement}}}}},
+                  {"measured", measured.string()},
+                  {"parameters", {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+                  {"fixed", {{"kn", 2.6e9}, {"ks", 0.9e9}}},
+                  {"objective", {{"type", 1}, {"window", "measured"}}},
+                  {"optimiser", {{"algorithm", "tbpso"}, {"population", 4}, {"iterations", 3}, {"seed", 1}}},
+                  {"report", false}};
+  std::ofstream(dir / "campaign.json") << j.dump(2);
+  const auto command = [&](const std::string& out, const std::string& continued) {
+    return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " + (dir / out).string() +
+           " --quiet --no-report --no-parameter-bounds --effects support-compliance --candidate-simulations 24"
+           " --evidence 1"
+           " --continued-simulations " + continued + " > /dev/null 2>&1";
+  };
+  ASSERT_EQ(std::system(command("once", "0").c_str()), 0);
+  ASSERT_EQ(std::system(command("further", "12").c_str()), 0);
+  const json once = test_support::read_json(dir / "once" / "diagnosis.json");
+  const json further = test_support::read_json(dir / "further" / "diagnosis.json");
+  // the first search's fit: accepted, above the floor (the precondition of this test)
+  ASSERT_EQ(once["chosen"], json::array({"support-compliance"})) << once["verdict"];
+  const json& first = once["candidates"][0];
+  EXPECT_FALSE(first.contains("continued")) << first.dump();
+  EXPECT_FALSE(fs::exists(dir / "once" / "candidates" / "support-compliance-continued"));
+  auto overall = [](const json& per_channel) {
+    double sum = 0;
+    for (const auto& [key, value] : per_channel.items()) sum += value.get<double>() * value.get<double>();
+    return std::sqrt(sum / static_cast<double>(per_channel.size()));
+  };
+  const double explained =
+      DiagnoseOptions{}.noise_level_ratio * error_floor(overall(once["noise"]), overall(once["scatter"]), DiagnoseOptions{});
+  ASSERT_GT(first["error"].get<double>(), explained) << "the first fit is already explained: nothing to continue";
+
+  // the same diagnosis up to the further search, which ran its budget in a calibration of its own
+  const json& c = further["candidates"][0];
+  ASSERT_TRUE(c.contains("continued")) << c.dump();
+  const json& continued = c["continued"];
+  EXPECT_EQ(continued["error_before"], first["error"]);
+  const json result = test_support::read_json(dir / "further" / "candidates" / "support-compliance-continued" / "result.json");
+  EXPECT_EQ(continued["simulations"], result["simulations"]);
+  EXPECT_GE(continued["simulations"].get<long>(), 8);
+  EXPECT_LE(continued["simulations"].get<long>(), 12);
+  EXPECT_EQ(c["simulations"].get<long>(), first["simulations"].get<long>() + continued["simulations"].get<long>());
+  // the closer fit is kept, on the median of its re-runs
+  const double found = continued["error_found"].get<double>(), before = first["error"].get<double>();
+  EXPECT_EQ(continued["kept"].get<bool>(), found < before);
+  EXPECT_DOUBLE_EQ(c["error"].get<double>(), std::min(found, before));
+  if (further["chosen"] == json::array({"support-compliance"})) {
+    EXPECT_DOUBLE_EQ(further["error_after"].get<double>(), std::min(found, before));
+  }
+  EXPECT_NE(further["verdict"].get<std::string>().find("was searched " + continued["simulations"].dump() + " simulations further"),
+            std::string::npos)
+      << further["verdict"];
+  EXPECT_EQ(further["simulations"].get<long>(),
+            once["simulations"].get<long>() + continued["simulations"].get<long>() + 1 + DiagnoseOptions{}.scatter_runs);
 }

@@ -269,10 +269,31 @@ struct DiagnoseOptions {
   // first, within max_simulations. profile_evaluations 0 = no re-fit (the conditional bound), >= 0.
   bool bound_parameters = true;
   int profile_evaluations = 20;
+  // Simulations of a further search for an accepted effect whose fit stays above the floor (its RMS
+  // error above noise_level_ratio x error_floor): the candidates' search with the next seed, whose
+  // surrogate trains on every archived run of the first (ContinuedSearch). Its fit replaces the
+  // first when closer to the measurement on the median of its re-runs, and the selection is made
+  // again with it. An effect's truth can be a narrow valley that one search budget reaches in some
+  // noise seeds only (measured on the arch's beam restraint, docs/diagnose.md). -1 (the default): a
+  // candidate's budget; 0: none; within max_simulations.
+  long continued_evaluations = -1;
   bool resume = false;                    // continue the base and candidate campaigns from their archives
   bool progress = true;                   // progress lines on stderr
   bool report = true;                     // report.md with figures
   void Validate() const;                  // throws CampaignError naming the field and value
+};
+
+// A further search of an accepted effect whose fit stayed above the error floor
+// (DiagnoseOptions::continued_evaluations).
+struct ContinuedSearch {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  long simulations = 0;        // of the further calibration (0: none ran)
+  double error_before = kNaN;  // the fit's RMS force error before it, N
+  double error_found = kNaN;   // the further search's fit, on the median of its re-runs, N (NaN: it failed)
+  bool kept = false;           // that fit replaced the first (a lower error)
+  std::string describe(const std::string& effect) const;  // a sentence for the verdict
+  nlohmann::json to_json() const;
 };
 
 struct EffectCandidate {
@@ -299,6 +320,7 @@ struct EffectCandidate {
   std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
   std::vector<ParameterBound> bounds;      // of the effect's parameters, when accepted or tied
+  ContinuedSearch continued;               // when accepted above the floor; the fit above is the kept one
   // effect parameter -> {lowest, highest} value searched: the registry's range, or for a
   // structure-relative one (dem::SearchScale) that of this structure; the calibration's box when
   // the effect was calibrated (a residual friction below the lowest friction searched), else the
