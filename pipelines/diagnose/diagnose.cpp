@@ -1293,13 +1293,12 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         progress(options, "the continued search of " + c.effect + " failed: " + ex.what());
       }
       ContinuedSearch continued{next.simulations, c.error, next.error, next.error < c.error};
+      const long simulations = c.simulations + continued.simulations;
       if (continued.kept) {
-        next.simulations += c.simulations;
         c = std::move(next);
         best_sets[c.effect] = next_set;
-      } else {
-        c.simulations += continued.simulations;
       }
+      c.simulations = simulations;
       c.continued = continued;
       effective_points = score_candidates(d);
       select_effect(d, options);

@@ -759,6 +759,29 @@ dem::ArchOptions cli_arch() {
   return o;
 }
 
+// The root mean square over the channels of a diagnosis.json map ("<case>/<channel>" -> N).
+double overall(const json& per_channel) {
+  double sum = 0;
+  for (const auto& [key, value] : per_channel.items()) sum += value.get<double>() * value.get<double>();
+  return std::sqrt(sum / static_cast<double>(per_channel.size()));
+}
+
+// A campaign of one case on the command-line tests' faster arch, objective 1 over the measured
+// window, a small swarm: `parameters` free, `fixed` held.
+json fast_campaign(const std::string& name, const fs::path& measured, const json& parameters, const json& fixed) {
+  const dem::ArchOptions arch = cli_arch();
+  return {{"name", name},
+          {"scene", {{"generator", "arch"},
+                     {"options", {{"contacts_per_joint", arch.contacts_per_joint}, {"velocity", arch.velocity},
+                                  {"max_displacement", arch.max_displacement}}}}},
+          {"measured", measured.string()},
+          {"parameters", parameters},
+          {"fixed", fixed},
+          {"objective", {{"type", 1}, {"window", "measured"}}},
+          {"optimiser", {{"algorithm", "tbpso"}, {"population", 4}, {"iterations", 3}, {"seed", 1}}},
+          {"report", false}};
+}
+
 struct Truth {
   std::string effect;                          // "" = the control
   std::vector<std::string> targets;
@@ -1058,11 +1081,6 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   // An explicit --candidates capped a split base too; --candidates-at-split lifts the cap there,
   // and only there (this small search's base fit is split on this build: its re-runs scatter by
   // more than the noise).
-  auto overall = [](const json& per_channel) {
-    double sum = 0;
-    for (const auto& [key, value] : per_channel.items()) sum += value.get<double>() * value.get<double>();
-    return std::sqrt(sum / static_cast<double>(per_channel.size()));
-  };
   ASSERT_EQ(std::system((std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " +
                          (dir / "split").string() + " --quiet --held-out check --effects support-compliance,crushing-cap --candidates 1 "
                          "--candidates-at-split 2 --candidate-simulations 8 > /dev/null 2>&1")
@@ -1085,17 +1103,10 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
   const fs::path dir = test_support::fresh_dir("diagnose", "resume");
   const dem::ArchOptions arch = cli_arch();
   const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, arch);
-  const json j = {{"name", "resume"},
-                  {"scene", {{"generator", "arch"},
-                             {"options", {{"contacts_per_joint", arch.contacts_per_joint}, {"velocity", arch.velocity},
-                                          {"max_displacement", arch.max_displacement}}}}},
-                  {"measured", measured.string()},
-                  {"parameters", {{{"name", "kn"}, {"lower", 1e8}, {"upper", 1e10}, {"scale", "log10"}},
-                                  {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
-                  {"fixed", {{"ks", 0.9e9}}},
-                  {"objective", {{"type", 1}, {"window", "measured"}}},
-                  {"optimiser", {{"algorithm", "tbpso"}, {"population", 4}, {"iterations", 3}, {"seed", 1}}},
-                  {"report", false}};
+  const json j = fast_campaign("resume", measured,
+                               {{{"name", "kn"}, {"lower", 1e8}, {"upper", 1e10}, {"scale", "log10"}},
+                                {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}},
+                               {{"ks", 0.9e9}});
   std::ofstream(dir / "campaign.json") << j.dump(2);
   const auto command = [&](const std::string& out) {
     return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " + (dir / out).string() +
@@ -1136,16 +1147,8 @@ TEST(DiagnoseLoop, AnAcceptedFitAboveTheFloorIsSearchedFurther) {
   const fs::path dir = test_support::fresh_dir("diagnose", "continued");
   const dem::ArchOptions arch = cli_arch();
   const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, arch);
-  const json j = {{"name", "continued"},
-                  {"scene", {{"generator", "arch"},
-                             {"options", {{"contacts_per_joint", arch.contacts_per_joint}, {"velocity", arch.velocity},
-                                          {"max_displacement", arch.max_displacement}}}}},
-                  {"measured", measured.string()},
-                  {"parameters", {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
-                  {"fixed", {{"kn", 2.6e9}, {"ks", 0.9e9}}},
-                  {"objective", {{"type", 1}, {"window", "measured"}}},
-                  {"optimiser", {{"algorithm", "tbpso"}, {"population", 4}, {"iterations", 3}, {"seed", 1}}},
-                  {"report", false}};
+  const json j = fast_campaign("continued", measured, {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}},
+                               {{"kn", 2.6e9}, {"ks", 0.9e9}});
   std::ofstream(dir / "campaign.json") << j.dump(2);
   const auto command = [&](const std::string& out, const std::string& continued) {
     return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " + (dir / out).string() +
@@ -1162,11 +1165,6 @@ TEST(DiagnoseLoop, AnAcceptedFitAboveTheFloorIsSearchedFurther) {
   const json& first = once["candidates"][0];
   EXPECT_FALSE(first.contains("continued")) << first.dump();
   EXPECT_FALSE(fs::exists(dir / "once" / "candidates" / "support-compliance-continued"));
-  auto overall = [](const json& per_channel) {
-    double sum = 0;
-    for (const auto& [key, value] : per_channel.items()) sum += value.get<double>() * value.get<double>();
-    return std::sqrt(sum / static_cast<double>(per_channel.size()));
-  };
   const double explained =
       DiagnoseOptions{}.noise_level_ratio * error_floor(overall(once["noise"]), overall(once["scatter"]), DiagnoseOptions{});
   ASSERT_GT(first["error"].get<double>(), explained) << "the first fit is already explained: nothing to continue";
