@@ -75,8 +75,8 @@ void setup(CLI::App& app) {
                                    "(0 = every effect; default: every effect, or --candidates when given)");
   sub->add_option("--candidate-simulations", o.candidate_evaluations, "Simulations per candidate calibration (0 = the campaign's)");
   sub->add_option("--continued-simulations", o.continued_evaluations,
-                  "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter "
-                  "(-1 = a candidate's budget, 0 = none)")
+                  "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter, "
+                  "then, while no fit explains the curves, for each contender (-1 = a candidate's budget, 0 = none)")
       ->capture_default_str();
   sub->add_option("--candidate-algorithm", o.candidate_algorithm,
                   "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
@@ -84,6 +84,9 @@ void setup(CLI::App& app) {
       ->capture_default_str()
       ->check(CLI::IsMember({"gp", "mlp"}));
   sub->add_option("--evidence", o.evidence_threshold, "Criterion fall needed to accept an effect")->capture_default_str();
+  sub->add_option("--tie-margin", o.tie_margin,
+                  "Effects whose criteria are closer than this are tied (the data cannot tell them apart)")
+      ->capture_default_str();
   sub->add_option("--scatter-runs", o.scatter_runs,
                   "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)")->capture_default_str();
   sub->add_option("--scatter-floor-ratio", o.scatter_floor_ratio,

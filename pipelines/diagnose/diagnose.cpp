@@ -15,6 +15,7 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <set>
 #include <sstream>
 
 namespace demcal::pipelines {
@@ -887,6 +888,49 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   }
 }
 
+std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const DiagnoseOptions& options) {
+  const double floor = error_floor(overall_noise(d.base_residuals), overall(d.scatter), options);
+  const double explained = options.noise_level_ratio * floor;
+  const auto open = [&](const EffectCandidate& c) { return c.tried && c.continued.simulations == 0 && c.error > explained; };
+  // an accepted fit above the level: its own search first
+  for (const auto& c : d.candidates)
+    if (c.verdict == "accepted" && open(c)) return {c.effect};
+  // an accepted fit at the level explains the residual; so does a base fit near it
+  const bool explained_fit = std::any_of(d.candidates.begin(), d.candidates.end(), [&](const EffectCandidate& c) {
+    return c.verdict == "accepted" && !(c.error > explained);
+  });
+  if (explained_fit || !(d.error_before > kUnexplainedRatio * floor)) return {};
+  std::vector<std::string> names;
+  for (const auto& c : d.candidates) {
+    if (!open(c) || c.verdict == "accepted") continue;
+    const bool passes = c.score < -options.evidence_threshold && !check_held_out(c, d, options).spoils;
+    if (c.verdict == "tied" || passes) names.push_back(c.effect);
+  }
+  return names;
+}
+
+std::string unexplained_fit_note(const Diagnosis& d, const DiagnoseOptions& options) {
+  if (d.chosen.size() != 1) return "";
+  const double floor = error_floor(overall_noise(d.base_residuals), overall(d.scatter), options);
+  const double explained = options.noise_level_ratio * floor;
+  const EffectCandidate* chosen = nullptr;
+  const EffectCandidate* next = nullptr;  // the closest other fit
+  for (const auto& c : d.candidates) {
+    if (c.effect == d.chosen.front()) chosen = &c;
+    else if (c.tried && std::isfinite(c.error) && (next == nullptr || c.error < next->error)) next = &c;
+  }
+  if (chosen == nullptr || !(chosen->error > explained)) return "";
+  std::string note = " Its fit still misses the curves by more than the noise and scatter allow (" +
+                     format_number(chosen->error) + " N against " + format_number(explained) + " N, " +
+                     format_number(options.noise_level_ratio, 3) + " x their combined " + format_number(floor) +
+                     " N): " + chosen->effect + " explains part of the residual, not all of it; the rest is another "
+                     "effect, or a form of this one its search did not reach";
+  if (next != nullptr)
+    note += " (the closest other fit: " + next->effect + ", " + format_number(next->error) + " N, criterion " +
+            format_number(next->score) + ")";
+  return note + ".";
+}
+
 double error_floor(double noise, double scatter, const DiagnoseOptions& options) {
   if (!std::isfinite(scatter)) return noise;
   return std::hypot(noise, std::min(scatter, options.scatter_floor_ratio * noise));
@@ -1266,45 +1310,66 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
                 " N, scatter of the simulated curve about " + format_number(scatter) + " N)." + unfitted_data_note(d);
   } else {
     select_effect(d, options);
-    // 5b. the chosen effect's search continued while its fit stays above the floor: the search, not
-    // the effect, may be what leaves the error there (a stiffness whose truth is a narrow valley).
+    // 5b. a search continued while the selection leaves the residual above the floor: the search,
+    // not the effect, may be what leaves the error there (a stiffness whose truth is a narrow valley)
     const double explained = options.noise_level_ratio * error_floor(noise, scatter, options);
     const long continued_budget = options.continued_evaluations < 0 ? per_candidate : options.continued_evaluations;
-    for (auto& c : d.candidates) {
-      if (c.verdict != "accepted" || !(c.error > explained) || !models.count(c.effect)) continue;
-      const long budget = within_budget(continued_budget);
-      if (budget < 2 * config.optimiser.population) break;
-      const fs::path folder = fs::path(options.output) / "candidates" / (c.effect + "-continued");
-      progress(options, c.effect + "'s fit stays above the noise and scatter (" + format_number(c.error) + " against " +
-                            format_number(explained) + " N): its search continued (" + std::to_string(budget) +
-                            " simulations) in " + folder.string());
-      EffectCandidate next = c;
-      next.simulations = 0;
-      next.error = EffectCandidate::kNaN;  // stays NaN when the further search fails
-      std::map<std::string, double> next_set;
-      // another seed: a search of its own (and campaign of its own in the archive), whose surrogate
-      // trains on the first search's runs
-      ExtendedModel further = models.at(c.effect);
-      further.config.optimiser.seed += 1;
-      try {
-        calibrate_candidate(next, next_set, further, config, d.base_params, options, budget, folder,
-                            best_sets.at(c.effect), base.residuals, runner);
-      } catch (const std::exception& ex) {
-        progress(options, "the continued search of " + c.effect + " failed: " + ex.what());
+    std::set<std::string> searched_further;
+    for (auto names = candidates_to_search_further(d, options); continued_budget > 0;
+         names = candidates_to_search_further(d, options)) {
+      std::erase_if(names, [&](const std::string& n) { return searched_further.count(n) || !models.count(n); });
+      if (names.empty()) break;
+      // an accepted effect's own search takes what is left; contenders get the same search or none
+      const bool accepted_alone =
+          names.size() == 1 && std::any_of(d.candidates.begin(), d.candidates.end(), [&](const EffectCandidate& c) {
+            return c.effect == names.front() && c.verdict == "accepted";
+          });
+      const long budget = accepted_alone ? within_budget(continued_budget) : continued_budget;
+      const bool affordable = options.max_simulations <= 0 ||
+                              runner.simulations() + static_cast<long>(names.size()) * (budget + 1 + options.scatter_runs) <=
+                                  options.max_simulations;
+      if (budget < 2 * config.optimiser.population || !affordable) {
+        progress(options, "no further search of " + std::to_string(names.size()) + " effect(s): " +
+                              std::to_string(continued_budget) + " simulations each are short of two populations or "
+                              "over --max-simulations");
+        break;
       }
-      ContinuedSearch continued{next.simulations, c.error, next.error, next.error < c.error};
-      const long simulations = c.simulations + continued.simulations;
-      if (continued.kept) {
-        c = std::move(next);
-        best_sets[c.effect] = next_set;
+      for (const auto& name : names) {
+        searched_further.insert(name);
+        auto& c = *std::find_if(d.candidates.begin(), d.candidates.end(), [&](const auto& x) { return x.effect == name; });
+        const fs::path folder = fs::path(options.output) / "candidates" / (c.effect + "-continued");
+        progress(options, c.effect + "'s fit stays above the noise and scatter (" + format_number(c.error) + " against " +
+                              format_number(explained) + " N): its search continued (" + std::to_string(budget) +
+                              " simulations) in " + folder.string());
+        EffectCandidate next = c;
+        next.simulations = 0;
+        next.error = EffectCandidate::kNaN;  // stays NaN when the further search fails
+        std::map<std::string, double> next_set;
+        // another seed: a search of its own (and campaign of its own in the archive), whose surrogate
+        // trains on the first search's runs
+        ExtendedModel further = models.at(c.effect);
+        further.config.optimiser.seed += 1;
+        try {
+          calibrate_candidate(next, next_set, further, config, d.base_params, options, budget, folder,
+                              best_sets.at(c.effect), base.residuals, runner);
+        } catch (const std::exception& ex) {
+          progress(options, "the continued search of " + c.effect + " failed: " + ex.what());
+        }
+        ContinuedSearch continued{next.simulations, c.error, next.error, next.error < c.error};
+        const long simulations = c.simulations + continued.simulations;
+        if (continued.kept) {
+          c = std::move(next);
+          best_sets[c.effect] = next_set;
+        }
+        c.simulations = simulations;
+        c.continued = continued;
       }
-      c.simulations = simulations;
-      c.continued = continued;
       effective_points = score_candidates(d);
       select_effect(d, options);
     }
     for (const auto& c : d.candidates)
       if (c.continued.simulations > 0) d.verdict += " " + c.continued.describe(c.effect);
+    d.verdict += unexplained_fit_note(d, options);
     if (options.bound_parameters) {
       std::vector<std::string> bounds;  // of the chosen effect, for the verdict
       for (auto& c : d.candidates) {
@@ -1338,7 +1403,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
 }
 
 std::string ContinuedSearch::describe(const std::string& effect) const {
-  const std::string head = "Its fit above the noise and scatter, " + effect + " was searched " +
+  const std::string head = effect + "'s fit stayed above the noise and scatter, so it was searched " +
                            std::to_string(simulations) + " simulations further";
   if (kept) return head + ", which lowered its error from " + format_number(error_before) + " to " + format_number(error_found) + " N.";
   if (!std::isfinite(error_found)) return head + "; that search failed, and the first fit stands.";

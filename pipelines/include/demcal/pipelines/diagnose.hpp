@@ -269,13 +269,16 @@ struct DiagnoseOptions {
   // first, within max_simulations. profile_evaluations 0 = no re-fit (the conditional bound), >= 0.
   bool bound_parameters = true;
   int profile_evaluations = 20;
-  // Simulations of a further search for an accepted effect whose fit stays above the floor (its RMS
-  // error above noise_level_ratio x error_floor): the candidates' search with the next seed, whose
-  // surrogate trains on every archived run of the first (ContinuedSearch). Its fit replaces the
-  // first when closer to the measurement on the median of its re-runs, and the selection is made
-  // again with it. An effect's truth can be a narrow valley that one search budget reaches in some
-  // noise seeds only (measured on the arch's beam restraint, docs/diagnose.md). -1 (the default): a
-  // candidate's budget; 0: none; within max_simulations.
+  // Simulations of a further search for each candidate whose fit stays above the floor (its RMS
+  // error above noise_level_ratio x error_floor) where the selection leaves the residual
+  // unexplained: the accepted effect, or with none accepted the contenders
+  // (candidates_to_search_further). The candidates' search with the next seed, whose surrogate
+  // trains on every archived run of the first (ContinuedSearch). Its fit replaces the first when
+  // closer to the measurement on the median of its re-runs, and the selection is made again with
+  // it. An effect's truth can be a narrow valley that one search budget reaches in some noise seeds
+  // only (measured on the arch's beam restraint and joint closure, docs/diagnose.md). -1 (the
+  // default): a candidate's budget; 0: none; within max_simulations (contenders searched all or
+  // none, so that none gets more search than another).
   long continued_evaluations = -1;
   bool resume = false;                    // continue the base and candidate campaigns from their archives
   bool progress = true;                   // progress lines on stderr
@@ -283,8 +286,8 @@ struct DiagnoseOptions {
   void Validate() const;                  // throws CampaignError naming the field and value
 };
 
-// A further search of an accepted effect whose fit stayed above the error floor
-// (DiagnoseOptions::continued_evaluations).
+// A further search of a candidate whose fit stayed above the error floor
+// (DiagnoseOptions::continued_evaluations, candidates_to_search_further).
 struct ContinuedSearch {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
@@ -320,7 +323,7 @@ struct EffectCandidate {
   std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
   std::vector<ParameterBound> bounds;      // of the effect's parameters, when accepted or tied
-  ContinuedSearch continued;               // when accepted above the floor; the fit above is the kept one
+  ContinuedSearch continued;               // when searched further (candidates_to_search_further); the fit above is the kept one
   // effect parameter -> {lowest, highest} value searched: the registry's range, or for a
   // structure-relative one (dem::SearchScale) that of this structure; the calibration's box when
   // the effect was calibrated (a residual friction below the lowest friction searched), else the
@@ -439,6 +442,27 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 // is named).
 constexpr double kUnexplainedRatio = 2;
 void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// Step 5b, after select_effect: the candidates whose search goes on (DiagnoseOptions::
+// continued_evaluations), by name, in the diagnosis's order; called again after each round.
+// - An accepted effect whose fit is above the level at which the loop calls a fit explained
+//   (noise_level_ratio x error_floor): that effect alone.
+// - Then, while no accepted fit is at that level and the base fit misses by more than
+//   kUnexplainedRatio x the floor, the contenders above it: the tied candidates and those whose
+//   criterion falls by more than evidence_threshold without spoiling held-out data (rejected
+//   because their error did not fall, or as clearly less good than an accepted fit that itself
+//   stayed above the level after its own further search). Each gets the same further budget, so
+//   that no effect wins by search effort: the truth of an effect can be a valley its first search
+//   missed (docs/diagnose.md, "Contenders searched further").
+// A candidate already searched further (continued.simulations > 0) is not named again.
+std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// A sentence for the verdict when the chosen effect's fit, after any further search, still misses
+// the curves by more than the level at which the loop calls a fit explained (noise_level_ratio x
+// error_floor): the effect explains part of the residual, not all of it, and the closest other fit
+// is named with its error and criterion (measured: a wedge-shaped joint gap imitated by a
+// compliant support whose fit stays above that level, docs/diagnose.md). "" otherwise.
+std::string unexplained_fit_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // What no model can remove (N): the hypotenuse of the measurement noise and the simulation's own
 // scatter, the scatter counted up to options.scatter_floor_ratio x the noise (a NaN scatter: none).
