@@ -888,8 +888,15 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   }
 }
 
+namespace {
+// The diagnosis's error floor (error_floor of its base noise and scatter), N.
+double floor_of(const Diagnosis& d, const DiagnoseOptions& options) {
+  return error_floor(overall_noise(d.base_residuals), overall(d.scatter), options);
+}
+}  // namespace
+
 std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const DiagnoseOptions& options) {
-  const double floor = error_floor(overall_noise(d.base_residuals), overall(d.scatter), options);
+  const double floor = floor_of(d, options);
   const double explained = options.noise_level_ratio * floor;
   const auto open = [&](const EffectCandidate& c) { return c.tried && c.continued.simulations == 0 && c.error > explained; };
   // an accepted fit above the level: its own search first
@@ -911,7 +918,7 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const 
 
 std::string unexplained_fit_note(const Diagnosis& d, const DiagnoseOptions& options) {
   if (d.chosen.size() != 1) return "";
-  const double floor = error_floor(overall_noise(d.base_residuals), overall(d.scatter), options);
+  const double floor = floor_of(d, options);
   const double explained = options.noise_level_ratio * floor;
   const EffectCandidate* chosen = nullptr;
   const EffectCandidate* next = nullptr;  // the closest other fit

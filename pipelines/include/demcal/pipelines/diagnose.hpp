@@ -271,7 +271,7 @@ struct DiagnoseOptions {
   int profile_evaluations = 20;
   // Simulations of a further search for each candidate whose fit stays above the floor (its RMS
   // error above noise_level_ratio x error_floor) where the selection leaves the residual
-  // unexplained: the accepted effect, or with none accepted the contenders
+  // unexplained: the accepted effect, then, while no fit explains the curves, the contenders
   // (candidates_to_search_further). The candidates' search with the next seed, whose surrogate
   // trains on every archived run of the first (ContinuedSearch). Its fit replaces the first when
   // closer to the measurement on the median of its re-runs, and the selection is made again with
