@@ -1322,8 +1322,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     const double explained = options.noise_level_ratio * error_floor(noise, scatter, options);
     const long continued_budget = options.continued_evaluations < 0 ? per_candidate : options.continued_evaluations;
     std::set<std::string> searched_further;
-    for (auto names = candidates_to_search_further(d, options); continued_budget > 0;
-         names = candidates_to_search_further(d, options)) {
+    while (continued_budget > 0) {
+      std::vector<std::string> names = candidates_to_search_further(d, options);
       std::erase_if(names, [&](const std::string& n) { return searched_further.count(n) || !models.count(n); });
       if (names.empty()) break;
       // an accepted effect's own search takes what is left; contenders get the same search or none
