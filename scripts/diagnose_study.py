@@ -60,8 +60,9 @@ def hidden_effect(case, magnitude=1.0):
         return ["--beam-kr", "%g" % (3e4 * m)], {"beam_kr": 3e4 * m}
     if case == "joint-gap":
         # a wedge open at the extrados of the joint under the load, where the plain model's hinge forms
+        # (a taper of 1: closed at the intrados)
         return (["--gap-joint", GAP_JOINT, "--gap-extrados", "%g" % (1e-3 * m)],
-                {"gap_extrados": 1e-3 * m, "gap_intrados": 0.0})
+                {"gap_opening": 1e-3 * m, "gap_taper": 1.0})
     raise KeyError(case)
 
 
@@ -130,18 +131,18 @@ def run_one(binary, args, case, seed):
 
 def recovered(diagnosis, case, magnitude):
     """Largest relative error of the hidden effect's parameters in the chosen fit (None: not chosen);
-    a parameter whose truth is 0 (a gap's closed end) is judged against the largest truth."""
+    a gap's taper as the engine reads it (beyond +-1: +-1)."""
     _, truth = hidden_effect(case, magnitude)
     c = chosen_fit(diagnosis, case)
     if c is None:
         return None
-    scale = max(abs(v) for v in truth.values())
     worst = 0.0
     for suffix, value in truth.items():
         found = [v for k, v in c["params"].items() if k.split(".")[-1] == suffix]
         if not found:
             return None
-        worst = max(worst, abs(found[0] - value) / (abs(value) or scale))
+        v = max(-1.0, min(1.0, found[0])) if suffix == "gap_taper" else found[0]
+        worst = max(worst, abs(v - value) / abs(value))
     return worst
 
 

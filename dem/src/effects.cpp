@@ -58,10 +58,12 @@ std::vector<Effect> build_registry() {
   r.push_back({"joint-gap",
                "an initial opening at one joint, uniform or wedge-shaped (imperfect fit, lost mortar)",
                EffectTarget::joint,
-               {P{"gap_intrados", "m", "opening at the intrados (lower) end of the joint", 0, JointGap::kMaxOpening, 0,
-                  3e-3, false, 5e-4},
-                P{"gap_extrados", "m", "opening at the extrados (upper) end of the joint", 0, JointGap::kMaxOpening, 0,
-                  3e-3, false, 5e-4}}});
+               // As the wider end's opening and a taper (JointGap): a wedge closed at one end, the
+               // likelier imperfection, lies inside the taper's range (beyond +-1), not on its face.
+               {P{"gap_opening", "m", "opening at the wider end of the joint", 0, JointGap::kMaxOpening, 0, 3e-3, false,
+                  5e-4},
+                P{"gap_taper", "1", "share of the opening closed at the other end: 0 uniform, 1 closed at the intrados, "
+                  "-1 at the extrados (beyond 1: 1)", -JointGap::kMaxTaper, JointGap::kMaxTaper, -1.5, 1.5, false, 0}}});
   r.push_back({"boundary-restraint",
                "a loading beam neither fixed nor free in rotation: a rotational spring to its start angle",
                EffectTarget::beam_block,

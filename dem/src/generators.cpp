@@ -90,8 +90,8 @@ void apply_effects(Scene& s, const EffectOptions& e) {
   }
   if (!e.gap_joint.empty()) {
     s.joint_gap.joint = e.gap_joint;
-    s.joint_gap.intrados = e.gap_intrados;
-    s.joint_gap.extrados = e.gap_extrados;
+    set_parameter(s, "gap_intrados", e.gap_intrados);
+    set_parameter(s, "gap_extrados", e.gap_extrados);
   } else if (e.gap_intrados != 0 || e.gap_extrados != 0) {
     throw SceneError("--gap-intrados/--gap-extrados", "need --gap-joint to name the joint");
   }

@@ -127,6 +127,11 @@ void require_within_friction(double angle, double friction_angle, bool capped, c
 
 }  // namespace
 
+void JointGap::set_ends(double intrados, double extrados) {
+  opening = std::max(intrados, extrados);
+  taper = !(opening > 0) ? 0 : extrados >= intrados ? 1 - intrados / opening : extrados / opening - 1;
+}
+
 void JointMaterial::Validate(const std::string& where) const {
   require_positive(normal_stiffness, where + ".kn");
   require_positive(shear_stiffness, where + ".ks");
@@ -226,8 +231,12 @@ void Scene::Validate(const std::string& source) const {
     Vec2 p, q;
     if (!geometry::shared_edge(blocks[ia].vertices, blocks[ib].vertices, p, q))
       throw SceneError(where + ".joint", "blocks of '" + joint_gap.joint + "' share no edge at the start");
-    require_at_most(joint_gap.intrados, JointGap::kMaxOpening, where + ".intrados", "m; a fit imperfection");
-    require_at_most(joint_gap.extrados, JointGap::kMaxOpening, where + ".extrados", "m; a fit imperfection");
+    require_at_most(joint_gap.opening, JointGap::kMaxOpening, where + ".opening", "m; a fit imperfection");
+    require_finite(joint_gap.taper, where + ".taper");
+    if (std::abs(joint_gap.taper) > JointGap::kMaxTaper)
+      throw SceneError(where + ".taper", "must be in [-" + format_value(JointGap::kMaxTaper) + ", " +
+                                             format_value(JointGap::kMaxTaper) + "] (beyond 1 it equals 1), got " +
+                                             format_value(joint_gap.taper));
   }
 
   const int n = contact.points_per_joint;
@@ -407,8 +416,17 @@ Scene scene_from_json(const json& j, const std::string& source) {
   if (root.has("joint_gap")) {
     const ObjectReader c(root.required("joint_gap"), at("joint_gap"));
     scene.joint_gap.joint = c.string("joint");
-    scene.joint_gap.intrados = c.number("intrados", 0);
-    scene.joint_gap.extrados = c.number("extrados", 0);
+    if (c.has("opening") || c.has("taper")) {
+      if (c.has("intrados") || c.has("extrados"))
+        throw SceneError(at("joint_gap"), "give the opening and taper or the intrados and extrados ends, not both");
+      scene.joint_gap.opening = c.number("opening", 0);
+      scene.joint_gap.taper = c.number("taper", 0);
+    } else {
+      const double intrados = c.number("intrados", 0), extrados = c.number("extrados", 0);
+      require_non_negative(intrados, at("joint_gap") + ".intrados");
+      require_non_negative(extrados, at("joint_gap") + ".extrados");
+      scene.joint_gap.set_ends(intrados, extrados);
+    }
   }
   scene.Validate(source);
   return scene;
@@ -486,8 +504,8 @@ json scene_to_json(const Scene& scene) {
     j["gauges"].push_back({{"name", g.name}, {"block", g.block}, {"point", vec2_json(g.point)},
                            {"direction", vec2_json(g.direction)}});
   if (scene.joint_gap.on())
-    j["joint_gap"] = {{"joint", scene.joint_gap.joint}, {"intrados", scene.joint_gap.intrados},
-                      {"extrados", scene.joint_gap.extrados}};
+    j["joint_gap"] = {{"joint", scene.joint_gap.joint}, {"opening", scene.joint_gap.opening},
+                      {"taper", scene.joint_gap.taper}};
   return j;
 }
 
@@ -622,7 +640,7 @@ ParameterTarget resolve(const Scene& scene, const std::string& name, bool for_re
     }
     return t;
   }
-  if (field == "gap_intrados" || field == "gap_extrados") {
+  if (field == "gap_intrados" || field == "gap_extrados" || field == "gap_opening" || field == "gap_taper") {
     if (!prefix.empty()) throw SceneError(where, "the gap openings take no prefix (the joint is joint_gap.joint)");
     if (!scene.joint_gap.on()) throw SceneError(where, "the scene names no gap joint (set joint_gap.joint first)");
     t.kind = ParameterTarget::Kind::gap;
@@ -631,7 +649,7 @@ ParameterTarget resolve(const Scene& scene, const std::string& name, bool for_re
   throw SceneError(where, "unknown parameter (expected kn, ks, friction_deg, closure_max, friction_residual_deg, "
                           "friction_loss_deg, slip_softening, cohesion, tensile_strength, compressive_strength, crushing_softening "
                           "[as <joint group>.<name> for one group], <block>.support_kx|support_ky|support_kr, "
-                          "beam_kr, gap_intrados or gap_extrados)");
+                          "beam_kr, gap_intrados, gap_extrados, gap_opening or gap_taper)");
 }
 
 }  // namespace
@@ -653,9 +671,19 @@ void set_parameter(Scene& scene, const std::string& name, double value) {
     case ParameterTarget::Kind::blocks:
       for (const auto& b : t.names) block_field(scene.blocks[scene.block_index(b)], t.field) = value;
       return;
-    case ParameterTarget::Kind::gap:
-      (t.field == "gap_intrados" ? scene.joint_gap.intrados : scene.joint_gap.extrados) = value;
+    case ParameterTarget::Kind::gap: {
+      JointGap& gap = scene.joint_gap;
+      if (t.field == "gap_opening") {
+        gap.opening = value;
+      } else if (t.field == "gap_taper") {
+        gap.taper = value;
+      } else {
+        require_non_negative(value, "parameter '" + name + "'");
+        if (t.field == "gap_intrados") gap.set_ends(value, gap.extrados());
+        else gap.set_ends(gap.intrados(), value);
+      }
       return;
+    }
   }
 }
 
@@ -671,8 +699,12 @@ double get_parameter(const Scene& scene, const std::string& name) {
       Block b = scene.blocks[scene.block_index(t.names.front())];
       return block_field(b, t.field);
     }
-    case ParameterTarget::Kind::gap:
-      return t.field == "gap_intrados" ? scene.joint_gap.intrados : scene.joint_gap.extrados;
+    case ParameterTarget::Kind::gap: {
+      const JointGap& gap = scene.joint_gap;
+      if (t.field == "gap_opening") return gap.opening;
+      if (t.field == "gap_taper") return gap.taper;
+      return t.field == "gap_intrados" ? gap.intrados() : gap.extrados();
+    }
   }
   return 0;
 }
@@ -692,8 +724,7 @@ std::vector<std::string> parameter_names(const Scene& scene) {
   for (const Block& b : scene.blocks)
     if (!b.fixed && b.beam_kr > 0) names.push_back(b.name + ".beam_kr");
   if (scene.joint_gap.on()) {
-    names.push_back("gap_intrados");
-    names.push_back("gap_extrados");
+    for (const char* field : {"gap_intrados", "gap_extrados", "gap_opening", "gap_taper"}) names.push_back(field);
   }
   return names;
 }

@@ -284,6 +284,7 @@ class Engine {
   bool has_gap_ = false;
   std::uint64_t gap_key_ = 0;
   Vec2 gap_intrados_local_ = Vec2::Zero(), gap_extrados_local_ = Vec2::Zero();
+  double gap_intrados_ = 0, gap_extrados_ = 0;  // m, the openings there
 
   // Loading.
   bool has_actuator_ = false;
@@ -372,6 +373,8 @@ void Engine::setup_gap() {
   gap_key_ = (static_cast<std::uint64_t>(ia) << 32) | static_cast<std::uint32_t>(ib);
   gap_intrados_local_ = bodies_[ia].to_local(p_first ? p : q);
   gap_extrados_local_ = bodies_[ia].to_local(p_first ? q : p);
+  gap_intrados_ = gap.intrados();
+  gap_extrados_ = gap.extrados();
 }
 
 void Engine::setup_loading() {
@@ -785,7 +788,7 @@ void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& g
     const Vec2 point = layout.r1 + s_nodes[k] * layout.tr + 0.5 * gap * layout.normal;
     if (layout.gap_joint) {
       const double t = std::clamp((point - gap_from).dot(gap_along) / gap_along.squaredNorm(), 0.0, 1.0);
-      gap += scene_.joint_gap.intrados + t * (scene_.joint_gap.extrados - scene_.joint_gap.intrados);
+      gap += gap_intrados_ + t * (gap_extrados_ - gap_intrados_);
     }
     contact.gap[slot] = gap;
     // A bond exists only where the faces touch at the start (within 1 um).

@@ -587,9 +587,10 @@ std::string finding(const EffectCandidate& c, const std::map<std::string, double
     if (value("support_kx", &a)) s << ": horizontal stiffness about " << format_number(a / 1e6) << " MN/m (a 10 kN thrust moves it by about " << format_number(1e4 / a * 1e3) << " mm)";
     if (value("support_ky", &b)) s << ", vertical about " << format_number(b / 1e6) << " MN/m";
     if (value("support_kr", &d)) s << ", rotational about " << format_number(d / 1e3) << " kN·m/rad";
-  } else if (c.effect == "joint-gap" && value("gap_intrados", &a) && value("gap_extrados", &b)) {
-    s << "joint " << c.target << " was already open before loading: about " << format_number(a * 1e3)
-      << " mm at the intrados and " << format_number(b * 1e3) << " mm at the extrados (imperfect fit or lost mortar)";
+  } else if (c.effect == "joint-gap" && value("gap_opening", &a) && value("gap_taper", &b)) {
+    const dem::JointGap gap{c.target, a, b};
+    s << "joint " << c.target << " was already open before loading: about " << format_number(gap.intrados() * 1e3)
+      << " mm at the intrados and " << format_number(gap.extrados() * 1e3) << " mm at the extrados (imperfect fit or lost mortar)";
   } else if (c.effect == "boundary-restraint" && value("beam_kr", &a)) {
     s << "the loading beam is neither fixed nor free in rotation: a rotational restraint of about "
       << format_number(a / 1e3) << " kN·m/rad";

@@ -318,7 +318,7 @@ TEST(JointGap, NoForceUntilTheGapClosesThenThePlainLaw) {
   // the actuator only drives the free block's 8 kg at constant speed.
   const double g = 2e-4, kn = 1e9;
   Scene s = pressed(4e-4);
-  s.joint_gap = {"top/base", g, g};
+  s.joint_gap = {"top/base", g, 0};  // uniform
   const Recording r = simulate(s);
   ASSERT_EQ(r.status, RunStatus::completed) << r.message;
   const double scale = kn * kArea * (4e-4 - g);
@@ -346,7 +346,7 @@ TEST(JointGap, WedgeClosesFromTheIntradosEnd) {
   Scene s = pressed(6e-4);
   s.contact.points_per_joint = 101;
   s.blocks[1].fixed_rotation = true;
-  s.joint_gap = {"base/top", 0, g};
+  s.joint_gap = {"base/top", g, 1};  // closed at the intrados
   const Recording r = simulate(s);
   ASSERT_EQ(r.status, RunStatus::completed) << r.message;
   int checked = 0;
@@ -427,6 +427,40 @@ TEST(Effects, OptionsRoundTripThroughJsonAndChangeTheHash) {
   EXPECT_EQ(get_parameter(back, "gap_extrados"), 1e-3);
 }
 
+TEST(JointGap, OpeningAndTaperSetTheEndsInEitherOrder) {
+  Scene s = make_arch(ArchOptions{});
+  s.joint_gap.joint = "voussoir_9/voussoir_10";
+  // a wedge closed at the intrados; past 1 the taper means 1, so a search holds it on a range
+  for (const double taper : {1.0, 1.3}) {
+    Scene a = s, b = s;
+    set_parameter(a, "gap_opening", 1e-3);
+    set_parameter(a, "gap_taper", taper);
+    set_parameter(b, "gap_taper", taper);
+    set_parameter(b, "gap_opening", 1e-3);
+    for (const Scene* x : {&a, &b}) {
+      EXPECT_EQ(get_parameter(*x, "gap_intrados"), 0);
+      EXPECT_EQ(get_parameter(*x, "gap_extrados"), 1e-3);
+      EXPECT_EQ(get_parameter(*x, "gap_taper"), taper);
+    }
+  }
+  set_parameter(s, "gap_opening", 2e-3);
+  set_parameter(s, "gap_taper", -0.25);  // a quarter closed at the extrados end
+  EXPECT_DOUBLE_EQ(get_parameter(s, "gap_intrados"), 2e-3);
+  EXPECT_DOUBLE_EQ(get_parameter(s, "gap_extrados"), 1.5e-3);
+  set_parameter(s, "gap_opening", 4e-3);  // the taper kept
+  EXPECT_DOUBLE_EQ(get_parameter(s, "gap_extrados"), 3e-3);
+  set_parameter(s, "gap_intrados", 1e-3);  // the other end kept: now the wider end is the extrados
+  EXPECT_DOUBLE_EQ(get_parameter(s, "gap_opening"), 3e-3);
+  EXPECT_DOUBLE_EQ(get_parameter(s, "gap_taper"), 1 - 1.0 / 3);
+  EXPECT_DOUBLE_EQ(get_parameter(s, "gap_intrados"), 1e-3);
+  // the same scene through either form in JSON
+  nlohmann::json ends = scene_to_json(s);
+  ends["joint_gap"] = {{"joint", "voussoir_9/voussoir_10"}, {"intrados", 1e-3}, {"extrados", 3e-3}};
+  EXPECT_DOUBLE_EQ(get_parameter(scene_from_json(ends), "gap_taper"), 1 - 1.0 / 3);
+  ends["joint_gap"]["taper"] = 0.5;
+  EXPECT_THROW(scene_from_json(ends), SceneError);  // both forms at once
+}
+
 TEST(Effects, ValidateNamesTheKeyAndTheValue) {
   const Scene arch = make_arch(ArchOptions{});
   Scene s = arch;
@@ -449,12 +483,15 @@ TEST(Effects, ValidateNamesTheKeyAndTheValue) {
   s.blocks[3].support_kx = 1e6;  // a voussoir is free
   expect_invalid(s, "apply to fixed blocks only");
   s = arch;
-  s.joint_gap = {"voussoir_9/voussoir_11", 1e-4, 1e-4};
+  s.joint_gap = {"voussoir_9/voussoir_11", 1e-4, 0};
   expect_invalid(s, "joint_gap.joint: blocks of 'voussoir_9/voussoir_11' share no edge");
-  s.joint_gap = {"voussoir_9/nothing", 1e-4, 1e-4};
+  s.joint_gap = {"voussoir_9/nothing", 1e-4, 0};
   expect_invalid(s, "does not name two different blocks");
   s.joint_gap = {"voussoir_9/voussoir_10", 0.02, 0};
-  expect_invalid(s, "joint_gap.intrados: must be at most 0.01");
+  expect_invalid(s, "joint_gap.opening: must be at most 0.01");
+  s.joint_gap = {"voussoir_9/voussoir_10", 1e-3, -2.5};
+  expect_invalid(s, "joint_gap.taper: must be in [-2, 2] (beyond 1 it equals 1), got -2.5");
+  EXPECT_THROW(set_parameter(s, "gap_extrados", -1e-4), SceneError);  // an end has no sign to hold
   EXPECT_THROW(set_parameter(s, "voussoir_3.support_kx", 1), SceneError);   // a free block
   EXPECT_THROW(set_parameter(s, "abutment_left.beam_kr", 1), SceneError);   // a fixed block
   Scene no_gap = arch;
@@ -564,7 +601,7 @@ TEST(EffectFlags, SceneCommandWritesEveryOption) {
   EXPECT_EQ(a.blocks[a.block_index("abutment_right")].support_kr, 1e7);
   EXPECT_EQ(a.blocks[a.block_index("abutment_left")].support_kx, 0);
   EXPECT_EQ(a.joint_gap.joint, "voussoir_9/voussoir_10");
-  EXPECT_EQ(a.joint_gap.extrados, 1e-3);
+  EXPECT_EQ(a.joint_gap.extrados(), 1e-3);
   EXPECT_EQ(a.blocks[a.block_index("voussoir_5")].beam_kr, 1e6);
 
   r = run_demcal("scene wall --support-ky 1e9 --beam-kr 2e6 -o " + wall);

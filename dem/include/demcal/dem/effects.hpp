@@ -25,7 +25,7 @@ enum class SearchScale {
 // One numeric parameter of an effect, named as set_parameter's field ("closure_max").
 struct EffectParameter {
   std::string name;
-  std::string unit;           // SI ("m", "Pa", "N/m", "N m/rad"), or "deg" for the friction angle
+  std::string unit;           // SI ("m", "Pa", "N/m", "N m/rad"), "deg" for the friction angle, "1" for a ratio
   std::string meaning;        // one line
   double lower_bound = 0;     // physical bounds Scene::Validate enforces (upper may be +infinity)
   double upper_bound = 0;

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json_fwd.hpp>
 
+#include <algorithm>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -80,18 +81,30 @@ struct JointMaterial {
 };
 
 // joint-gap: an initial opening at one joint (imperfect fit, lost mortar). The opening varies
-// linearly from `intrados` at one end of the joint to `extrados` at the other (uniform when equal).
-// The intrados end is the end of the shared edge with the lower y at the start (for a level joint,
-// the one with the lower x): for the radial joints of an arch whose centre lies below, the inner end.
-// The joint is a scene option (`joint_gap.joint`, "blockA/blockB" in either order, the two blocks
-// must share an edge at the start); only the two openings are numeric parameters
-// (`gap_intrados`, `gap_extrados`). Off while `joint` is empty.
+// linearly from one end of the joint to the other (uniform when equal). The intrados end is the end
+// of the shared edge with the lower y at the start (for a level joint, the one with the lower x): for
+// the radial joints of an arch whose centre lies below, the inner end. It is held as
+//   opening  the wider end's opening (m);
+//   taper    the share of it closed at the other end: 0 uniform, +1 a wedge closed at the intrados
+//            (open at the extrados), -1 closed at the extrados. A taper beyond +-1 (up to
+//            +-kMaxTaper) means +-1: a search ranging past +-1 holds a closed end on a finite part
+//            of its range, not on one face of its box, where a wedge's best fit would lie;
+// the two ends (intrados(), extrados()) follow from them. The joint is a scene option
+// (`joint_gap.joint`, "blockA/blockB" in either order, the two blocks must share an edge at the
+// start); the numeric parameters are `gap_opening` and `gap_taper` (setting one keeps the other),
+// or the ends `gap_intrados` and `gap_extrados` (setting one keeps the other end). Off while
+// `joint` is empty.
 struct JointGap {
-  std::string joint;      // "voussoir_9/voussoir_10"
-  double intrados = 0;    // m, >= 0
-  double extrados = 0;    // m, >= 0
+  std::string joint;   // "voussoir_9/voussoir_10"
+  double opening = 0;  // m, in [0, kMaxOpening]
+  double taper = 0;    // in [-kMaxTaper, kMaxTaper]
   static constexpr double kMaxOpening = 0.01;  // m: larger openings are not a fit imperfection
+  static constexpr double kMaxTaper = 2;
   bool on() const { return !joint.empty(); }
+  double intrados() const { return taper > 0 ? opening * (1 - std::min(taper, 1.0)) : opening; }
+  double extrados() const { return taper < 0 ? opening * (1 + std::max(taper, -1.0)) : opening; }
+  // Both ends, >= 0 (not checked here): the wider one becomes the opening.
+  void set_ends(double intrados, double extrados);
 };
 
 // Which joint group a contact between two blocks belongs to. Blocks carry a label ("voussoir",
@@ -220,9 +233,10 @@ std::string scene_hash(const Scene& scene);
 // "crushing_softening" (m): a bare name sets every joint group, "<group>.<name>" one group.
 // Support springs by block: "<block>.support_kx", "<block>.support_ky" (N/m), "<block>.support_kr"
 // (N m/rad); bare, they set every fixed block. "beam_kr" (N m/rad) sets the loaded block's
-// rotational spring, "<block>.beam_kr" any free block's. "gap_intrados", "gap_extrados" (m) set
-// the openings of the scene's joint gap (the joint itself is the scene option joint_gap.joint).
-// Unknown names throw SceneError; values are checked by Scene::Validate, not here.
+// rotational spring, "<block>.beam_kr" any free block's. "gap_intrados", "gap_extrados" (m), or
+// "gap_opening" (m) and "gap_taper" (JointGap), set the openings of the scene's joint gap (the
+// joint itself is the scene option joint_gap.joint). Unknown names throw SceneError; values are
+// checked by Scene::Validate, not here, except a gap's end below 0 (the opening and taper hold none).
 void set_parameter(Scene& scene, const std::string& name, double value);
 double get_parameter(const Scene& scene, const std::string& name);
 // Every name set_parameter accepts for this scene (joint-group names, the support blocks' springs,
