@@ -907,12 +907,13 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const 
   const bool explained_fit = std::any_of(d.candidates.begin(), d.candidates.end(), [&](const EffectCandidate& c) {
     return c.verdict == "accepted" && !(c.error > explained);
   });
-  if (explained_fit || !(d.error_before > kUnexplainedRatio * floor)) return {};
+  if (explained_fit) return {};
+  const bool unexplained_base = d.error_before > kUnexplainedRatio * floor;
   std::vector<std::string> names;
   for (const auto& c : d.candidates) {
     if (!open(c) || c.verdict == "accepted") continue;
     const bool passes = c.score < -options.evidence_threshold && !check_held_out(c, d, options).spoils;
-    if (c.verdict == "tied" || passes) names.push_back(c.effect);
+    if (c.verdict == "tied" || (unexplained_base && passes)) names.push_back(c.effect);
   }
   return names;
 }

@@ -559,6 +559,14 @@ TEST(Evidence, AnUnexplainedResidualSearchesItsContendersFurther) {
   select_effect(d, options);
   ASSERT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
   EXPECT_TRUE(candidates_to_search_further(d, options).empty());
+  // ... but a tie there is undecided, and both are searched on (a compliant support and a joint
+  // gap within the criterion's tie margin, the support's seed 4 in docs/diagnose.md)
+  d.error_before = 105;  // within twice the floor
+  d.candidates = {tried_candidate("support-compliance", 96.0, -25.9), tried_candidate("joint-gap", 94.8, -21.5),
+                  tried_candidate("crushing-cap", 105.9, -4.6)};
+  select_effect(d, options);
+  ASSERT_NE(d.verdict.find("cannot tell"), std::string::npos) << d.verdict;
+  EXPECT_EQ(candidates_to_search_further(d, options), (std::vector<std::string>{"support-compliance", "joint-gap"}));
 }
 
 // The joint-closure measurement of docs/diagnose.md ("The goal study on the current build"), seed 2:

@@ -447,11 +447,12 @@ void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 // continued_evaluations), by name, in the diagnosis's order; called again after each round.
 // - An accepted effect whose fit is above the level at which the loop calls a fit explained
 //   (noise_level_ratio x error_floor): that effect alone.
-// - Then, while no accepted fit is at that level and the base fit misses by more than
-//   kUnexplainedRatio x the floor, the contenders above it: the tied candidates and those whose
-//   criterion falls by more than evidence_threshold without spoiling held-out data (rejected
-//   because their error did not fall, or as clearly less good than an accepted fit that itself
-//   stayed above the level after its own further search). Each gets the same further budget, so
+// - Then, while no accepted fit is at that level, the contenders above it: the tied candidates
+//   (a tie is undecided however close the base fit is), and, where the base fit misses by more
+//   than kUnexplainedRatio x the floor, those whose criterion falls by more than
+//   evidence_threshold without spoiling held-out data (rejected because their error did not
+//   fall, or as clearly less good than an accepted fit that itself stayed above the level after
+//   its own further search). Each gets the same further budget, so
 //   that no effect wins by search effort: the truth of an effect can be a valley its first search
 //   missed (docs/diagnose.md, "Contenders searched further").
 // A candidate already searched further (continued.simulations > 0) is not named again.
