@@ -452,9 +452,9 @@ void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 //   than kUnexplainedRatio x the floor, those whose criterion falls by more than
 //   evidence_threshold without spoiling held-out data (rejected because their error did not
 //   fall, or as clearly less good than an accepted fit that itself stayed above the level after
-//   its own further search). Each gets the same further budget, so
-//   that no effect wins by search effort: the truth of an effect can be a valley its first search
-//   missed (docs/diagnose.md, "Contenders searched further").
+//   its own further search). Each gets the same further budget, so that no effect wins by search
+//   effort: the truth of an effect can be a valley its first search missed (docs/diagnose.md,
+//   "Contenders searched further").
 // A candidate already searched further (continued.simulations > 0) is not named again.
 std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
