@@ -1321,7 +1321,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     select_effect(d, options);
     // 5b. a search continued while the selection leaves the residual above the floor: the search,
     // not the effect, may be what leaves the error there (a stiffness whose truth is a narrow valley)
-    const double explained = options.noise_level_ratio * error_floor(noise, scatter, options);
+    const double explained = options.noise_level_ratio * floor_of(d, options);
     const long continued_budget = options.continued_evaluations < 0 ? per_candidate : options.continued_evaluations;
     std::set<std::string> searched_further;
     while (continued_budget > 0) {
