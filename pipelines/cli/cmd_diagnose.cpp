@@ -87,6 +87,10 @@ void setup(CLI::App& app) {
   sub->add_option("--tie-margin", o.tie_margin,
                   "Effects whose criteria are closer than this are tied (the data cannot tell them apart)")
       ->capture_default_str();
+  sub->add_option("--close-target-share", o.close_target_share,
+                  "Other targets of an effect (joints, supports) calibrated too when their signature explains at least "
+                  "this share of the best target's; the better fit is kept (1 = the best target only)")
+      ->capture_default_str();
   sub->add_option("--scatter-runs", o.scatter_runs,
                   "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)")->capture_default_str();
   sub->add_option("--scatter-floor-ratio", o.scatter_floor_ratio,

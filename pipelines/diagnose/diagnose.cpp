@@ -39,6 +39,8 @@ void DiagnoseOptions::Validate() const {
   if (candidate_evaluations < 0) fail("candidate_evaluations", std::to_string(candidate_evaluations), "must be >= 0");
   if (!(evidence_threshold > 0)) fail("evidence_threshold", std::to_string(evidence_threshold), "must be > 0");
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
+  if (!(close_target_share > 0 && close_target_share <= 1))
+    fail("close_target_share", std::to_string(close_target_share), "must be in (0, 1]");
   if (profile_evaluations < 0) fail("profile_evaluations", std::to_string(profile_evaluations), "must be >= 0");
   if (continued_evaluations < -1)
     fail("continued_evaluations", std::to_string(continued_evaluations), "must be >= 0 (-1: a candidate's budget)");
@@ -1207,6 +1209,13 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     const auto residual = stacked(base.residuals, nullptr);
     const auto sensitivities = base_sensitivities(fitted, base_params, base.residuals, runner);
     std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> best probe's parameters
+    // A target probed for its signature: the candidate's signature fields, its model, its warm start.
+    struct ProbedTarget {
+      EffectCandidate candidate;
+      ExtendedModel model;
+      std::map<std::string, double> warm;
+    };
+    std::map<std::string, std::vector<ProbedTarget>> close_targets;  // effect -> other targets calibrated too
     const dem::Scene first_scene = build_scene(config.cases.front().scene, config.source + ": cases[0].scene");
     const dem::ResponseScales scales = response_scales(base, options);
     if (scales.peak_normal_stress > 0) d.peak_normal_stress = scales.peak_normal_stress;
@@ -1215,6 +1224,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       EffectCandidate best_target;
       best_target.effect = e->name;
       best_target.signature_score = -1;
+      std::vector<ProbedTarget> probed_targets;
       for (const auto& targets : targets_for(*e, base, first_scene)) {
         EffectCandidate c;
         c.effect = e->name;
@@ -1259,12 +1269,20 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         }
         if (!signatures.empty()) c.signature_score = signature_score(residual, sensitivities, signatures);
         if (signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
+        if (!c.target.empty())
+          progress(options, "  " + e->name + " at " + c.target + ": signature " + format_number(100 * c.signature_score, 2) +
+                                " %, best probe " + format_number(warm_error) + " N");
+        if (!signatures.empty()) probed_targets.push_back({c, m, warm});
         if (c.signature_score > best_target.signature_score) {
           best_target = c;
           models[e->name] = m;
           warm_starts[e->name] = warm;
         }
       }
+      for (auto& t : probed_targets)
+        if (t.candidate.target != best_target.target && best_target.signature_score > 0 &&
+            t.candidate.signature_score >= options.close_target_share * best_target.signature_score)
+          close_targets[e->name].push_back(std::move(t));
       if (best_target.signature_score < 0) {
         best_target.signature_score = 0;
         if (best_target.reason.empty()) best_target.reason = "no target for this effect in the scene";
@@ -1306,6 +1324,41 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
                             warm_starts[c.effect], base.residuals, runner);
       } catch (const std::exception& ex) {
         c.reason = std::string("its calibration failed: ") + ex.what();
+      }
+      // the other targets whose signatures the best one does not clearly beat: each calibrated
+      // alike, the better fit kept
+      for (auto& other : close_targets[c.effect]) {
+        const long other_budget = within_budget(per_candidate);
+        if (other_budget < 2 * config.optimiser.population) break;
+        std::string name = other.candidate.target;
+        std::replace(name.begin(), name.end(), '/', '-');
+        const fs::path other_folder = fs::path(options.output) / "candidates" / (c.effect + "-at-" + name);
+        progress(options, "calibrating base + " + c.effect + " at " + other.candidate.target + " too (signature " +
+                              format_number(100 * other.candidate.signature_score, 2) + " % against " +
+                              format_number(100 * c.signature_score, 2) + " % at " + c.target + ", " +
+                              std::to_string(other_budget) + " simulations) in " + other_folder.string());
+        EffectCandidate alt = other.candidate;
+        alt.tried = true;
+        std::map<std::string, double> alt_set;
+        try {
+          calibrate_candidate(alt, alt_set, other.model, config, d.base_params, options, other_budget, other_folder,
+                              other.warm, base.residuals, runner);
+        } catch (const std::exception& ex) {
+          progress(options, "the calibration of " + c.effect + " at " + alt.target + " failed: " + ex.what());
+        }
+        const bool better = std::isfinite(alt.error) && !(alt.error >= c.error);
+        EffectCandidate& loser = better ? c : alt;
+        std::vector<EffectCandidate::OtherTarget> others = std::move(c.other_targets);
+        others.push_back({loser.target, loser.signature_score, loser.error, loser.simulations});
+        const long simulations = c.simulations + alt.simulations;
+        if (better) {
+          c = std::move(alt);
+          models[c.effect] = other.model;
+          best_sets[c.effect] = alt_set;
+          warm_starts[c.effect] = other.warm;
+        }
+        c.other_targets = std::move(others);
+        c.simulations = simulations;
       }
     }
   }
@@ -1455,6 +1508,13 @@ json Diagnosis::to_json() const {
     for (const auto& [name, range] : c.search_ranges) ranges[name] = {range[0], range[1]};
     cands.back()["search_ranges"] = ranges;
     if (c.continued.simulations > 0) cands.back()["continued"] = c.continued.to_json();
+    if (!c.other_targets.empty()) {
+      json others = json::array();
+      for (const auto& o : c.other_targets)
+        others.push_back({{"target", o.target}, {"signature_score", o.signature_score}, {"error", finite_or_null(o.error)},
+                          {"simulations", o.simulations}});
+      cands.back()["other_targets"] = others;
+    }
     if (!c.bounds.empty()) {
       json bounds = json::object();
       for (const auto& b : c.bounds) bounds[b.name] = b.to_json();

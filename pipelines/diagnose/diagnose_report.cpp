@@ -124,6 +124,13 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
        << num(c.held_out_error) << " | " << num(c.score) << " | " << c.verdict << " | " << c.reason << " |\n";
   }
   md << "\n";
+  for (const auto& c : d.candidates)
+    for (const auto& o : c.other_targets)
+      md << "- " << c.effect << " was also calibrated at " << o.target << ", whose signature came close ("
+         << num(o.signature_score, 2) << "): RMS error " << num(o.error) << " N in " << o.simulations
+         << " simulations; the table keeps the better fit.\n";
+  if (std::any_of(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return !c.other_targets.empty(); }))
+    md << "\n";
   if (!d.effective_points.empty()) {
     std::string counts;
     for (const auto& [key, n] : d.effective_points)

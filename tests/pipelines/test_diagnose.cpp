@@ -12,6 +12,7 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <set>
 
 using namespace demcal;
 using namespace demcal::pipelines;
@@ -760,6 +761,11 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   o.profile_evaluations = 20;
   o.continued_evaluations = -2;
   expect_rejected(o, "continued_evaluations = -2", "a further search's budget below -1");
+  o.continued_evaluations = -1;
+  o.close_target_share = 0;
+  expect_rejected(o, "close_target_share = 0", "a share of the best target's signature of 0");
+  o.close_target_share = 1.5;
+  expect_rejected(o, "close_target_share = 1.5", "a share above 1");
 }
 
 // A base calibration reused with --result must be one of the campaign's parameters: otherwise the
@@ -1278,6 +1284,35 @@ void contenders_searched_further(const Diagnose& diagnose, const fs::path& dir) 
   }
 }
 
+// The third part of DiagnoseLoop.AFitLeftAboveTheFloorIsSearchedFurther: an effect whose other
+// target's signature comes close to its best one's (here every other target, by a tiny
+// --close-target-share) is calibrated at both, and the better fit is the candidate's.
+template <typename Diagnose>
+void close_targets_calibrated(const Diagnose& diagnose, const fs::path& dir) {
+  const json one = diagnose("--effects support-compliance --close-target-share 1", "0");
+  const json both = diagnose("--effects support-compliance --close-target-share 1e-6", "0");
+  const json& first = one["candidates"][0];
+  ASSERT_FALSE(first.contains("other_targets")) << first.dump();
+  const json& kept = both["candidates"][0];
+  ASSERT_TRUE(kept.contains("other_targets")) << kept.dump();
+  ASSERT_EQ(kept["other_targets"].size(), 1u);
+  const json& other = kept["other_targets"][0];
+  const std::set<std::string> supports{"abutment_left", "abutment_right"};
+  ASSERT_TRUE(supports.count(first["target"]) && supports.count(kept["target"]) && supports.count(other["target"]))
+      << kept.dump();
+  EXPECT_NE(kept["target"], other["target"]);
+  EXPECT_LE(kept["error"].get<double>(), other["error"].get<double>());
+  // the best-signature target's fit is the one calibrated before, kept or not
+  const json& primary = kept["target"] == first["target"] ? kept : other;
+  EXPECT_DOUBLE_EQ(primary["error"].get<double>(), first["error"].get<double>());
+  const std::string second = kept["target"] == first["target"] ? other["target"] : kept["target"];
+  const json result =
+      test_support::read_json(dir / "diag" / "candidates" / ("support-compliance-at-" + second) / "result.json");
+  EXPECT_EQ(kept["simulations"].get<long>(), first["simulations"].get<long>() + result["simulations"].get<long>());
+  EXPECT_EQ(both["simulations"].get<long>(),
+            one["simulations"].get<long>() + result["simulations"].get<long>() + 1 + DiagnoseOptions{}.scatter_runs);
+}
+
 // A fit left above the error floor is searched further (its calibration continued on every
 // archived run of it), and the closer of the two fits is the diagnosis's: an accepted effect here,
 // the contenders of an unexplained residual in contenders_searched_further. --continued-simulations
@@ -1333,4 +1368,5 @@ TEST(DiagnoseLoop, AFitLeftAboveTheFloorIsSearchedFurther) {
   EXPECT_LT(further["session"]["simulated"].get<long>(), further["simulations"].get<long>());  // the calibrations read back
 
   contenders_searched_further(diagnose, dir);
+  close_targets_calibrated(diagnose, dir);
 }

@@ -215,6 +215,13 @@ struct DiagnoseOptions {
   // otherwise >= 1, and at least max_candidates.
   int candidates_at_split = 0;
   int candidate_evaluations = 0;          // simulations per candidate calibration; 0 = the campaign's
+  // An effect with several possible targets (a joint gap at each hinge, springs at either support)
+  // is calibrated at its best-signature target and also at every other target whose signature
+  // explains at least this share of the best one's; the better fit (lower error) is kept. Measured:
+  // a gap's signature at the joint under the load and at the other hinge can differ by 1 %
+  // (docs/diagnose.md, "A joint gap at two close targets"). In (0, 1]; 1 = the best target only
+  // unless another matches it exactly.
+  double close_target_share = 0.9;
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
   double tie_margin = 6;                  // effects whose criteria are closer than this are tied, >= 0
   double noise_level_ratio = 1.25;        // base RMS / noise at or below this: nothing to explain, >= 1
@@ -310,6 +317,15 @@ struct EffectCandidate {
   double fitness = kNaN;                   // the campaign objective of that set
   std::map<std::string, double> rms;       // "<case>/<channel>" -> RMS force error, N
   double error = kNaN;                     // RMS force error over all channels, N
+  // Other targets calibrated because their signatures came close (DiagnoseOptions::close_target_share):
+  // each one's signature share and fit; the fit above is the best of them and `target`.
+  struct OtherTarget {
+    std::string target;
+    double signature_score = 0;
+    double error = kNaN;                   // RMS force error of its fit (median run), N
+    long simulations = 0;
+  };
+  std::vector<OtherTarget> other_targets;
   // The overall error of the best set and of its re-runs with the parameters moved by k x 1e-7
   // (DiagnoseOptions::scatter_runs); rms, error, score and residuals are those of the median run.
   std::vector<double> rerun_errors;
