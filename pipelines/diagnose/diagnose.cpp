@@ -24,6 +24,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 using detail::format_number;
+using detail::file_safe;
 using detail::parameter_field;
 using detail::write_diagnosis_report;
 
@@ -1303,36 +1304,14 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       progress(options, "the base fit sits where the response splits (scatter " + format_number(scatter) + " N, noise " +
                             format_number(noise) + " N): more than the top " + std::to_string(options.max_candidates) +
                             " effects by signature are calibrated (--candidates-at-split)");
-    int tried = 0;
-    for (auto& c : d.candidates) {
-      if (!models.count(c.effect)) continue;
-      if (tried >= limit) {
-        c.reason = "ranked below the " + std::to_string(limit) + " effects tried";
-        continue;
-      }
-      const long budget = within_budget(per_candidate);
-      if (budget < 2 * config.optimiser.population) {
-        c.reason = "over the simulation budget";
-        continue;
-      }
-      const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
-      progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations) in " + folder.string());
-      ++tried;
-      c.tried = true;
-      try {
-        calibrate_candidate(c, best_sets[c.effect], models.at(c.effect), config, d.base_params, options, budget, folder,
-                            warm_starts[c.effect], base.residuals, runner);
-      } catch (const std::exception& ex) {
-        c.reason = std::string("its calibration failed: ") + ex.what();
-      }
-      // the other targets whose signatures the best one does not clearly beat: each calibrated
-      // alike, the better fit kept
+    // An effect's other targets whose signatures its best one does not clearly beat (close_targets):
+    // each calibrated alike; `c` keeps the fit of lower error, c.other_targets the others.
+    const auto calibrate_close_targets = [&](EffectCandidate& c) {
       for (auto& other : close_targets[c.effect]) {
         const long other_budget = within_budget(per_candidate);
         if (other_budget < 2 * config.optimiser.population) break;
-        std::string name = other.candidate.target;
-        std::replace(name.begin(), name.end(), '/', '-');
-        const fs::path other_folder = fs::path(options.output) / "candidates" / (c.effect + "-at-" + name);
+        const fs::path other_folder =
+            fs::path(options.output) / "candidates" / (c.effect + "-at-" + file_safe(other.candidate.target));
         progress(options, "calibrating base + " + c.effect + " at " + other.candidate.target + " too (signature " +
                               format_number(100 * other.candidate.signature_score, 2) + " % against " +
                               format_number(100 * c.signature_score, 2) + " % at " + c.target + ", " +
@@ -1355,11 +1334,34 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
           c = std::move(alt);
           models[c.effect] = other.model;
           best_sets[c.effect] = alt_set;
-          warm_starts[c.effect] = other.warm;
         }
         c.other_targets = std::move(others);
         c.simulations = simulations;
       }
+    };
+    int tried = 0;
+    for (auto& c : d.candidates) {
+      if (!models.count(c.effect)) continue;
+      if (tried >= limit) {
+        c.reason = "ranked below the " + std::to_string(limit) + " effects tried";
+        continue;
+      }
+      const long budget = within_budget(per_candidate);
+      if (budget < 2 * config.optimiser.population) {
+        c.reason = "over the simulation budget";
+        continue;
+      }
+      const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
+      progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations) in " + folder.string());
+      ++tried;
+      c.tried = true;
+      try {
+        calibrate_candidate(c, best_sets[c.effect], models.at(c.effect), config, d.base_params, options, budget, folder,
+                            warm_starts[c.effect], base.residuals, runner);
+      } catch (const std::exception& ex) {
+        c.reason = std::string("its calibration failed: ") + ex.what();
+      }
+      calibrate_close_targets(c);
     }
   }
 

@@ -19,6 +19,9 @@ std::string parameter_field(const std::string& name);
 void note_simulated_sampling(ChannelResidual& residual, const smoothing::XYSeries& simulated,
                              const smoothing::XYSeries& simulated_envelope);
 
+// `s` usable as a file or folder name: every character but letters, digits, '-' and '_' -> '_'.
+std::string file_safe(std::string s);
+
 // report.md and its figures (diagnose_report.cpp).
 void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 

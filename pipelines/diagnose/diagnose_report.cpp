@@ -26,12 +26,6 @@ std::string listed(const std::vector<double>& values) {
   return text;
 }
 
-std::string file_safe(std::string s) {
-  for (auto& ch : s)
-    if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '-' && ch != '_') ch = '_';
-  return s;
-}
-
 // Measured, base and extended curves of one channel, and the two residuals, as two stacked plots.
 std::string residual_figure(const ChannelResidual& base, const ChannelResidual* after, const std::string& after_label,
                             const fs::path& figures, const std::string& stem) {
@@ -60,6 +54,12 @@ std::string residual_figure(const ChannelResidual& base, const ChannelResidual* 
 }
 
 }  // namespace
+
+std::string detail::file_safe(std::string s) {
+  for (auto& ch : s)
+    if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '-' && ch != '_') ch = '_';
+  return s;
+}
 
 void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) {
   const fs::path out_dir = options.output, figures = out_dir / "figures";
@@ -105,7 +105,7 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
     const auto& r = d.base_residuals[i];
     const ChannelResidual* a = after && i < after->residuals.size() ? &after->residuals[i] : nullptr;
     md << residual_figure(r, a, a ? "base + " + after->effect : "", figures,
-                          "residual-" + file_safe(r.case_name + "-" + r.channel))
+                          "residual-" + detail::file_safe(r.case_name + "-" + r.channel))
        << "\n";
   }
   md << "## Candidate effects\n\n"
@@ -124,13 +124,13 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
        << num(c.held_out_error) << " | " << num(c.score) << " | " << c.verdict << " | " << c.reason << " |\n";
   }
   md << "\n";
+  std::ostringstream others;
   for (const auto& c : d.candidates)
     for (const auto& o : c.other_targets)
-      md << "- " << c.effect << " was also calibrated at " << o.target << ", whose signature came close ("
-         << num(o.signature_score, 2) << "): RMS error " << num(o.error) << " N in " << o.simulations
-         << " simulations; the table keeps the better fit.\n";
-  if (std::any_of(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return !c.other_targets.empty(); }))
-    md << "\n";
+      others << "- " << c.effect << " was also calibrated at " << o.target << ", whose signature came close ("
+             << num(o.signature_score, 2) << "): RMS error " << num(o.error) << " N in " << o.simulations
+             << " simulations; the table keeps the better fit.\n";
+  if (!others.str().empty()) md << others.str() << "\n";
   if (!d.effective_points.empty()) {
     std::string counts;
     for (const auto& [key, n] : d.effective_points)
