@@ -91,6 +91,10 @@ void setup(CLI::App& app) {
                   "Other targets of an effect (joints, supports) calibrated too when their signature explains at least "
                   "this share of the best target's; the better fit is kept (1 = the best target only)")
       ->capture_default_str();
+  sub->add_option("--close-candidate-share", o.close_candidate_share,
+                  "Effects ranked below the --candidates tried are calibrated too when their signature explains at "
+                  "least this share of the last one tried's (1 = only an exact tie)")
+      ->capture_default_str();
   sub->add_option("--scatter-runs", o.scatter_runs,
                   "Re-runs of the base best, parameters moved by 1e-7, that measure the simulation's own scatter (0 = none)")->capture_default_str();
   sub->add_option("--scatter-floor-ratio", o.scatter_floor_ratio,

@@ -42,6 +42,8 @@ void DiagnoseOptions::Validate() const {
   if (!(tie_margin >= 0)) fail("tie_margin", std::to_string(tie_margin), "must be >= 0");
   if (!(close_target_share > 0 && close_target_share <= 1))
     fail("close_target_share", std::to_string(close_target_share), "must be in (0, 1]");
+  if (!(close_candidate_share > 0 && close_candidate_share <= 1))
+    fail("close_candidate_share", std::to_string(close_candidate_share), "must be in (0, 1]");
   if (profile_evaluations < 0) fail("profile_evaluations", std::to_string(profile_evaluations), "must be >= 0");
   if (continued_evaluations < -1)
     fail("continued_evaluations", std::to_string(continued_evaluations), "must be >= 0 (-1: a candidate's budget)");
@@ -1340,9 +1342,11 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
       }
     };
     int tried = 0;
+    double last_tried_signature = 0;  // of the limit-th effect tried
     for (auto& c : d.candidates) {
       if (!models.count(c.effect)) continue;
-      if (tried >= limit) {
+      const bool close = c.signature_score > 0 && c.signature_score >= options.close_candidate_share * last_tried_signature;
+      if (tried >= limit && !close) {
         c.reason = "ranked below the " + std::to_string(limit) + " effects tried";
         continue;
       }
@@ -1352,8 +1356,10 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         continue;
       }
       const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
-      progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations) in " + folder.string());
-      ++tried;
+      const std::string why = tried < limit ? "" : ", its signature close to the last one tried";
+      progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations" + why + ") in " +
+                            folder.string());
+      if (++tried == limit) last_tried_signature = c.signature_score;
       c.tried = true;
       try {
         calibrate_candidate(c, best_sets[c.effect], models.at(c.effect), config, d.base_params, options, budget, folder,

@@ -766,6 +766,11 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   expect_rejected(o, "close_target_share = 0", "a share of the best target's signature of 0");
   o.close_target_share = 1.5;
   expect_rejected(o, "close_target_share = 1.5", "a share above 1");
+  o = DiagnoseOptions{};
+  o.close_candidate_share = 0;
+  expect_rejected(o, "close_candidate_share = 0", "a share of the last tried effect's signature of 0");
+  o.close_candidate_share = 2;
+  expect_rejected(o, "close_candidate_share = 2", "a share above 1");
 }
 
 // A base calibration reused with --result must be one of the campaign's parameters: otherwise the
@@ -1313,6 +1318,32 @@ void close_targets_calibrated(const Diagnose& diagnose, const fs::path& dir) {
             one["simulations"].get<long>() + result["simulations"].get<long>() + 1 + DiagnoseOptions{}.scatter_runs);
 }
 
+// The fourth part of DiagnoseLoop.AFitLeftAboveTheFloorIsSearchedFurther: an effect ranked below
+// the --candidates tried is calibrated too when its signature comes close to the last tried one's
+// (here any positive signature, by a tiny --close-candidate-share), and not otherwise.
+template <typename Diagnose>
+void close_candidates_calibrated(const Diagnose& diagnose, const fs::path& dir) {
+  const std::string effects = "--effects support-compliance,joint-gap --candidates 1 --close-target-share 1";
+  const json one = diagnose(effects + " --close-candidate-share 1", "0");
+  const json both = diagnose(effects + " --close-candidate-share 1e-6", "0");
+  ASSERT_EQ(one["candidates"].size(), 2u);
+  const json& second = one["candidates"][1];
+  ASSERT_GT(second["signature_score"].get<double>(), 0) << second.dump();
+  ASSERT_LT(second["signature_score"].get<double>(), one["candidates"][0]["signature_score"].get<double>());
+  EXPECT_TRUE(one["candidates"][0]["tried"].get<bool>());
+  EXPECT_FALSE(second["tried"].get<bool>());
+  EXPECT_NE(second["reason"].get<std::string>().find("ranked below the 1 effects tried"), std::string::npos) << second.dump();
+  ASSERT_EQ(both["candidates"].size(), 2u);
+  const json& close = both["candidates"][1];
+  ASSERT_EQ(close["effect"], second["effect"]);
+  EXPECT_TRUE(close["tried"].get<bool>()) << close.dump();
+  EXPECT_TRUE(std::isfinite(close["error"].get<double>()));
+  EXPECT_EQ(both["candidates"][0]["error"], one["candidates"][0]["error"]);  // the first one's fit unchanged
+  const std::string effect = close["effect"];
+  const json result = test_support::read_json(dir / "diag" / "candidates" / effect / "result.json");
+  EXPECT_EQ(close["simulations"], result["simulations"]);
+}
+
 // A fit left above the error floor is searched further (its calibration continued on every
 // archived run of it), and the closer of the two fits is the diagnosis's: an accepted effect here,
 // the contenders of an unexplained residual in contenders_searched_further. --continued-simulations
@@ -1369,4 +1400,5 @@ TEST(DiagnoseLoop, AFitLeftAboveTheFloorIsSearchedFurther) {
 
   contenders_searched_further(diagnose, dir);
   close_targets_calibrated(diagnose, dir);
+  close_candidates_calibrated(diagnose, dir);
 }

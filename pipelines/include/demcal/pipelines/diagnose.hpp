@@ -222,6 +222,12 @@ struct DiagnoseOptions {
   // (docs/diagnose.md, "A joint gap at two close targets"). In (0, 1]; 1 = the best target only
   // unless another matches it exactly.
   double close_target_share = 0.9;
+  // The same for the effects: one ranked below the max_candidates (or candidates_at_split) tried is
+  // calibrated too when its signature explains at least this share of the last tried one's, within
+  // the budget. Measured: the crushing cap ranked fourth at 24 % behind friction softening's 27 %
+  // on a measurement it explains (docs/diagnose.md, "Close effects at the cut"). In (0, 1]; 1 =
+  // only an exact tie.
+  double close_candidate_share = 0.9;
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
   double tie_margin = 6;                  // effects whose criteria are closer than this are tied, >= 0
   double noise_level_ratio = 1.25;        // base RMS / noise at or below this: nothing to explain, >= 1
