@@ -224,7 +224,7 @@ struct DiagnoseOptions {
   double close_target_share = 0.9;
   // The same for the effects: one ranked below the max_candidates (or candidates_at_split) tried is
   // calibrated too when its signature explains at least this share of the last tried one's, within
-  // the budget. Measured: the crushing cap ranked fourth at 24 % behind friction softening's 27 %
+  // the budget. Measured: the crushing cap ranked fourth at 24.5 % behind friction softening's 26.8 %
   // on a measurement it explains (docs/diagnose.md, "Close effects at the cut"). In (0, 1]; 1 =
   // only an exact tie.
   double close_candidate_share = 0.9;
