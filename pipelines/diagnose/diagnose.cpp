@@ -351,6 +351,12 @@ double at_fraction(const dem::EffectParameter& p, double t) {
   return p.search_min + t * (p.search_max - p.search_min);
 }
 
+// Whether a signature share comes within `share` of a positive reference share: a signature is a
+// linearisation from a few single runs, so shares that close do not order two targets or effects.
+bool signature_comes_close(double score, double reference, double share) {
+  return reference > 0 && score >= share * reference;
+}
+
 // Upper bound of a friction loss: never above the base friction angle of the same group.
 double friction_cap(const std::string& name, const std::map<std::string, double>& base) {
   if (name.find("friction_loss_deg") == std::string::npos) return std::numeric_limits<double>::infinity();
@@ -1283,8 +1289,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         }
       }
       for (auto& t : probed_targets)
-        if (t.candidate.target != best_target.target && best_target.signature_score > 0 &&
-            t.candidate.signature_score >= options.close_target_share * best_target.signature_score)
+        if (t.candidate.target != best_target.target &&
+            signature_comes_close(t.candidate.signature_score, best_target.signature_score, options.close_target_share))
           close_targets[e->name].push_back(std::move(t));
       if (best_target.signature_score < 0) {
         best_target.signature_score = 0;
@@ -1345,8 +1351,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
     double last_tried_signature = 0;  // of the limit-th effect tried
     for (auto& c : d.candidates) {
       if (!models.count(c.effect)) continue;
-      const bool close = c.signature_score > 0 && c.signature_score >= options.close_candidate_share * last_tried_signature;
-      if (tried >= limit && !close) {
+      const bool below_cut = tried >= limit;
+      if (below_cut && !signature_comes_close(c.signature_score, last_tried_signature, options.close_candidate_share)) {
         c.reason = "ranked below the " + std::to_string(limit) + " effects tried";
         continue;
       }
@@ -1356,7 +1362,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         continue;
       }
       const fs::path folder = fs::path(options.output) / "candidates" / c.effect;
-      const std::string why = tried < limit ? "" : ", its signature close to the last one tried";
+      const std::string why = below_cut ? ", its signature close to the last one tried" : "";
       progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations" + why + ") in " +
                             folder.string());
       if (++tried == limit) last_tried_signature = c.signature_score;
