@@ -892,7 +892,7 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
                   "candidate effects explains enough of it for its extra parameters (closest: " + closest->effect +
                   ", " + format_number(d.error_before) + " -> " + format_number(closest->error) + " N, criterion " +
                   format_number(closest->score) + "). The missing effect is not among those tried, or their searches "
-                  "did not reach its fit (more --candidate-simulations)." + unfitted_data_note(d);
+                  "did not reach its fit." + unfitted_data_note(d);
     } else {
       d.verdict = "No effect needed: none of the candidate effects explains the residual better than its extra "
                   "parameters cost (" + errors + ")." + unfitted_data_note(d);
@@ -949,6 +949,24 @@ std::string unexplained_fit_note(const Diagnosis& d, const DiagnoseOptions& opti
     note += " (the closest other fit: " + next->effect + ", " + format_number(next->error) + " N, criterion " +
             format_number(next->score) + ")";
   return note + ".";
+}
+
+std::string more_search_note(const Diagnosis& d, const DiagnoseOptions& options, long per_candidate) {
+  const double floor = floor_of(d, options);
+  bool unresolved = false;
+  if (d.chosen.size() == 1) {
+    for (const auto& c : d.candidates)
+      if (c.effect == d.chosen.front()) unresolved = c.error > options.noise_level_ratio * floor;
+  } else {
+    const bool tie = std::any_of(d.candidates.begin(), d.candidates.end(), [](const EffectCandidate& c) { return c.verdict == "tied"; });
+    const bool fitted = std::any_of(d.candidates.begin(), d.candidates.end(),
+                                    [](const EffectCandidate& c) { return c.tried && std::isfinite(c.error); });
+    unresolved = tie || (fitted && d.error_before > kUnexplainedRatio * floor);
+  }
+  if (!unresolved || per_candidate <= 0) return "";
+  return " A longer search may reach fits this one did not: run it again with --candidate-simulations " +
+         std::to_string(2 * per_candidate) + " (twice this diagnosis's " + std::to_string(per_candidate) +
+         " per candidate) to check the verdict.";
 }
 
 double error_floor(double noise, double scatter, const DiagnoseOptions& options) {
@@ -1462,6 +1480,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         d.verdict += ".";
       }
     }
+    d.verdict += more_search_note(d, options, per_candidate);
   }
   d.verdict += split_response_note(d, options) + base_at_bound_note(d, config.space) + narrow_window_note(d) +
                sparse_measurement_note(d);

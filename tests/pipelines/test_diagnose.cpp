@@ -570,6 +570,45 @@ TEST(Evidence, AnUnexplainedResidualSearchesItsContendersFurther) {
   EXPECT_EQ(candidates_to_search_further(d, options), (std::vector<std::string>{"support-compliance", "joint-gap"}));
 }
 
+// The verdicts that leave the question open advise twice the search per candidate (docs/diagnose.md,
+// "The budget"): no effect found, a tie, a chosen fit above the explained level; the settled ones
+// do not.
+TEST(Evidence, AnOpenVerdictAdvisesALongerSearch) {
+  const DiagnoseOptions options;
+  Diagnosis d;
+  ChannelResidual base;
+  base.noise = 55;  // explained at 68.75 N, unexplained above 110 N
+  d.base_residuals = {base};
+  const std::string advice = "run it again with --candidate-simulations 160 (twice this diagnosis's 80 per candidate)";
+  // no effect found: the crushing cap's fit short of its criterion, the base far above the floor
+  d.error_before = 401;
+  d.candidates = {tried_candidate("crushing-cap", 394, -0.2), tried_candidate("friction-softening", 398, 1.5)};
+  select_effect(d, options);
+  ASSERT_NE(d.verdict.find("No effect found"), std::string::npos) << d.verdict;
+  EXPECT_NE(more_search_note(d, options, 80).find(advice), std::string::npos);
+  // a tie
+  d.error_before = 316;
+  d.candidates = {tried_candidate("joint-closure", 170, -14.1), tried_candidate("support-compliance", 172, -13.9)};
+  select_effect(d, options);
+  ASSERT_NE(d.verdict.find("cannot tell"), std::string::npos) << d.verdict;
+  EXPECT_NE(more_search_note(d, options, 80).find(advice), std::string::npos);
+  // a chosen fit above the explained level, then at it
+  d.candidates = {tried_candidate("joint-closure", 175, -40), tried_candidate("cohesion", 300, -12)};
+  select_effect(d, options);
+  ASSERT_EQ(d.chosen, std::vector<std::string>{"joint-closure"}) << d.verdict;
+  EXPECT_NE(more_search_note(d, options, 80).find(advice), std::string::npos);
+  d.candidates[0].error = 60;
+  select_effect(d, options);
+  ASSERT_EQ(d.chosen, std::vector<std::string>{"joint-closure"}) << d.verdict;
+  EXPECT_EQ(more_search_note(d, options, 80), "");
+  // no effect needed: the base near the floor
+  d.error_before = 100;
+  d.candidates = {tried_candidate("joint-closure", 104, -1)};
+  select_effect(d, options);
+  ASSERT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
+  EXPECT_EQ(more_search_note(d, options, 80), "");
+}
+
 // The joint-closure measurement of docs/diagnose.md ("The goal study on the current build"), seed 2:
 // the base fit, its kn at the upper bound, misses the curves by 3 x the noise, and its re-runs
 // (177, 197, 333 N) scatter by 2.8 x the noise. Counted in full, that scatter excused the base

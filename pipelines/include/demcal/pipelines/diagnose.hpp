@@ -487,6 +487,14 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis
 // compliant support whose fit stays above that level, docs/diagnose.md). "" otherwise.
 std::string unexplained_fit_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
+// A sentence for the verdict when it leaves the question open: no effect found (the base misses by
+// more than kUnexplainedRatio x the floor and no candidate is accepted), a tie, or a chosen fit
+// above the explained level. It advises a diagnosis with twice `per_candidate` simulations per
+// candidate: in the goal study such searches reached the valleys that shorter ones missed (a
+// crushing cap unfound, a joint closure tied with a compliant support, a joint gap imitated by one;
+// docs/diagnose.md, "The budget"). "" otherwise.
+std::string more_search_note(const Diagnosis& diagnosis, const DiagnoseOptions& options, long per_candidate);
+
 // What no model can remove (N): the hypotenuse of the measurement noise and the simulation's own
 // scatter, the scatter counted up to options.scatter_floor_ratio x the noise (a NaN scatter: none).
 // Step 2's "nothing to explain" test and step 5's "No effect found" both measure against it.
