@@ -958,7 +958,8 @@ std::string more_search_note(const Diagnosis& d, const DiagnoseOptions& options,
     for (const auto& c : d.candidates)
       if (c.effect == d.chosen.front()) unresolved = c.error > options.noise_level_ratio * floor;
   } else {
-    const bool tie = std::any_of(d.candidates.begin(), d.candidates.end(), [](const EffectCandidate& c) { return c.verdict == "tied"; });
+    const bool tie =
+        std::any_of(d.candidates.begin(), d.candidates.end(), [](const EffectCandidate& c) { return c.verdict == "tied"; });
     const bool fitted = std::any_of(d.candidates.begin(), d.candidates.end(),
                                     [](const EffectCandidate& c) { return c.tried && std::isfinite(c.error); });
     unresolved = tie || (fitted && d.error_before > kUnexplainedRatio * floor);
