@@ -951,7 +951,7 @@ std::string unexplained_fit_note(const Diagnosis& d, const DiagnoseOptions& opti
   return note + ".";
 }
 
-std::string more_search_note(const Diagnosis& d, const DiagnoseOptions& options, long per_candidate) {
+long advised_candidate_simulations(const Diagnosis& d, const DiagnoseOptions& options, long per_candidate) {
   const double floor = floor_of(d, options);
   bool unresolved = false;
   if (d.chosen.size() == 1) {
@@ -964,9 +964,13 @@ std::string more_search_note(const Diagnosis& d, const DiagnoseOptions& options,
                                     [](const EffectCandidate& c) { return c.tried && std::isfinite(c.error); });
     unresolved = tie || (fitted && d.error_before > kUnexplainedRatio * floor);
   }
-  if (!unresolved || per_candidate <= 0) return "";
+  return unresolved && per_candidate > 0 ? 2 * per_candidate : 0;
+}
+
+std::string more_search_note(long advised, long per_candidate) {
+  if (advised <= 0) return "";
   return " A longer search may reach fits this one did not: run it again with --candidate-simulations " +
-         std::to_string(2 * per_candidate) + " (twice this diagnosis's " + std::to_string(per_candidate) +
+         std::to_string(advised) + " (twice this diagnosis's " + std::to_string(per_candidate) +
          " per candidate) to check the verdict.";
 }
 
@@ -1481,7 +1485,8 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
         d.verdict += ".";
       }
     }
-    d.verdict += more_search_note(d, options, per_candidate);
+    d.advised_candidate_simulations = advised_candidate_simulations(d, options, per_candidate);
+    d.verdict += more_search_note(d.advised_candidate_simulations, per_candidate);
   }
   d.verdict += split_response_note(d, options) + base_at_bound_note(d, config.space) + narrow_window_note(d) +
                sparse_measurement_note(d);
@@ -1567,6 +1572,7 @@ json Diagnosis::to_json() const {
           {"candidates", cands},
           {"chosen", chosen},
           {"verdict", verdict},
+          {"advised_candidate_simulations", advised_candidate_simulations > 0 ? json(advised_candidate_simulations) : json()},
           {"error_before", finite_or_null(error_before)},
           {"error_after", finite_or_null(error_after)},
           {"peak_normal_stress", finite_or_null(peak_normal_stress)},

@@ -579,34 +579,38 @@ TEST(Evidence, AnOpenVerdictAdvisesALongerSearch) {
   ChannelResidual base;
   base.noise = 55;  // explained at 68.75 N, unexplained above 110 N
   d.base_residuals = {base};
-  const std::string advice = "run it again with --candidate-simulations 160 (twice this diagnosis's 80 per candidate)";
+  const auto advised = [&] { return advised_candidate_simulations(d, options, 80); };
+  EXPECT_NE(more_search_note(160, 80).find("run it again with --candidate-simulations 160 (twice this diagnosis's 80 per "
+                                           "candidate)"),
+            std::string::npos);
+  EXPECT_EQ(more_search_note(0, 80), "");
   // no effect found: the crushing cap's fit short of its criterion, the base far above the floor
   d.error_before = 401;
   d.candidates = {tried_candidate("crushing-cap", 394, -0.2), tried_candidate("friction-softening", 398, 1.5)};
   select_effect(d, options);
   ASSERT_NE(d.verdict.find("No effect found"), std::string::npos) << d.verdict;
-  EXPECT_NE(more_search_note(d, options, 80).find(advice), std::string::npos);
+  EXPECT_EQ(advised(), 160);
   // a tie
   d.error_before = 316;
   d.candidates = {tried_candidate("joint-closure", 170, -14.1), tried_candidate("support-compliance", 172, -13.9)};
   select_effect(d, options);
   ASSERT_NE(d.verdict.find("cannot tell"), std::string::npos) << d.verdict;
-  EXPECT_NE(more_search_note(d, options, 80).find(advice), std::string::npos);
+  EXPECT_EQ(advised(), 160);
   // a chosen fit above the explained level, then at it
   d.candidates = {tried_candidate("joint-closure", 175, -40), tried_candidate("cohesion", 300, -12)};
   select_effect(d, options);
   ASSERT_EQ(d.chosen, std::vector<std::string>{"joint-closure"}) << d.verdict;
-  EXPECT_NE(more_search_note(d, options, 80).find(advice), std::string::npos);
+  EXPECT_EQ(advised(), 160);
   d.candidates[0].error = 60;
   select_effect(d, options);
   ASSERT_EQ(d.chosen, std::vector<std::string>{"joint-closure"}) << d.verdict;
-  EXPECT_EQ(more_search_note(d, options, 80), "");
+  EXPECT_EQ(advised(), 0);
   // no effect needed: the base near the floor
   d.error_before = 100;
   d.candidates = {tried_candidate("joint-closure", 104, -1)};
   select_effect(d, options);
   ASSERT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
-  EXPECT_EQ(more_search_note(d, options, 80), "");
+  EXPECT_EQ(advised(), 0);
 }
 
 // The joint-closure measurement of docs/diagnose.md ("The goal study on the current build"), seed 2:
@@ -993,6 +997,7 @@ TEST(DiagnoseLoop, ControlNeedsNoEffect) {
   EXPECT_EQ(d.error_after, d.error_before);
   EXPECT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
   for (const auto& c : d.candidates) EXPECT_NE(c.verdict, "accepted") << c.effect;
+  EXPECT_EQ(d.advised_candidate_simulations, 0);  // a settled verdict advises no longer search
 }
 
 // The reduced goal test (docs/diagnose.md): horizontal springs of 5 MN/m under the right abutment,
@@ -1062,6 +1067,14 @@ TEST_P(CompliantSupport, NamedAndRecovered) {
   for (const char* key : {"base", "noise", "effective_points", "candidates", "chosen", "error_before", "error_after"})
     EXPECT_TRUE(j.contains(key)) << key;
   EXPECT_EQ(j["candidates"].size(), 2u);
+  // the advice of a longer search in words and as a number, or neither
+  ASSERT_TRUE(j.contains("advised_candidate_simulations"));
+  if (j["advised_candidate_simulations"].is_null())
+    EXPECT_EQ(d.verdict.find("A longer search"), std::string::npos) << d.verdict;
+  else
+    EXPECT_NE(d.verdict.find("--candidate-simulations " + std::to_string(j["advised_candidate_simulations"].get<long>())),
+              std::string::npos)
+        << d.verdict;
   for (const auto& c : j["candidates"])
     if (c["verdict"] == "accepted") {
       EXPECT_EQ(c["bounds"].size(), 3u) << c.dump();

@@ -375,6 +375,8 @@ struct Diagnosis {
   std::map<std::string, std::string> effective_points_from;
   std::vector<std::string> chosen;         // [] = no effect needed (or a tie)
   std::string verdict;                     // the conclusion in words
+  long advised_candidate_simulations = 0;  // a longer search the verdict advises (0: none; see
+                                           // advised_candidate_simulations())
   double error_before = kNaN;              // RMS force error over all channels, N
   double error_after = kNaN;
   double peak_normal_stress = kNaN;        // Pa, largest contact stress of the base best run over the
@@ -487,13 +489,16 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis
 // compliant support whose fit stays above that level, docs/diagnose.md). "" otherwise.
 std::string unexplained_fit_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
-// A sentence for the verdict when it leaves the question open: no effect found (the base misses by
-// more than kUnexplainedRatio x the floor and no candidate is accepted), a tie, or a chosen fit
-// above the explained level. It advises a diagnosis with twice `per_candidate` simulations per
-// candidate: in the goal study such searches reached the valleys that shorter ones missed (a
-// crushing cap unfound, a joint closure tied with a compliant support, a joint gap imitated by one;
-// docs/diagnose.md, "The budget"). "" otherwise.
-std::string more_search_note(const Diagnosis& diagnosis, const DiagnoseOptions& options, long per_candidate);
+// The simulations per candidate a further diagnosis should get when this one leaves the question
+// open (no effect found: the base misses by more than kUnexplainedRatio x the floor and no
+// candidate is accepted; a tie; or a chosen fit above the explained level): twice `per_candidate`.
+// In the goal study such searches reached valleys that shorter ones missed (a crushing cap
+// unfound, a joint closure tied with a compliant support, a joint gap imitated by one;
+// docs/diagnose.md, "The budget"). 0 when the verdict is settled.
+long advised_candidate_simulations(const Diagnosis& diagnosis, const DiagnoseOptions& options, long per_candidate);
+
+// The verdict's sentence advising that further diagnosis ("" when `advised` is 0).
+std::string more_search_note(long advised, long per_candidate);
 
 // What no model can remove (N): the hypotenuse of the measurement noise and the simulation's own
 // scatter, the scatter counted up to options.scatter_floor_ratio x the noise (a NaN scatter: none).
