@@ -929,17 +929,25 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const 
   return names;
 }
 
+namespace {
+// The chosen effect when its fit misses the curves by more than the explained level; else null.
+const EffectCandidate* unexplained_chosen(const Diagnosis& d, const DiagnoseOptions& options) {
+  if (d.chosen.size() != 1) return nullptr;
+  const double explained = options.noise_level_ratio * floor_of(d, options);
+  for (const auto& c : d.candidates)
+    if (c.effect == d.chosen.front()) return c.error > explained ? &c : nullptr;
+  return nullptr;
+}
+}  // namespace
+
 std::string unexplained_fit_note(const Diagnosis& d, const DiagnoseOptions& options) {
-  if (d.chosen.size() != 1) return "";
+  const EffectCandidate* chosen = unexplained_chosen(d, options);
+  if (chosen == nullptr) return "";
   const double floor = floor_of(d, options);
   const double explained = options.noise_level_ratio * floor;
-  const EffectCandidate* chosen = nullptr;
   const EffectCandidate* next = nullptr;  // the closest other fit
-  for (const auto& c : d.candidates) {
-    if (c.effect == d.chosen.front()) chosen = &c;
-    else if (c.tried && std::isfinite(c.error) && (next == nullptr || c.error < next->error)) next = &c;
-  }
-  if (chosen == nullptr || !(chosen->error > explained)) return "";
+  for (const auto& c : d.candidates)
+    if (&c != chosen && c.tried && std::isfinite(c.error) && (next == nullptr || c.error < next->error)) next = &c;
   std::string note = " Its fit still misses the curves by more than the noise and scatter allow (" +
                      format_number(chosen->error) + " N against " + format_number(explained) + " N, " +
                      format_number(options.noise_level_ratio, 3) + " x their combined " + format_number(floor) +
@@ -952,17 +960,13 @@ std::string unexplained_fit_note(const Diagnosis& d, const DiagnoseOptions& opti
 }
 
 long advised_candidate_simulations(const Diagnosis& d, const DiagnoseOptions& options, long per_candidate) {
-  const double floor = floor_of(d, options);
-  bool unresolved = false;
-  if (d.chosen.size() == 1) {
-    for (const auto& c : d.candidates)
-      if (c.effect == d.chosen.front()) unresolved = c.error > options.noise_level_ratio * floor;
-  } else {
+  bool unresolved = unexplained_chosen(d, options) != nullptr;
+  if (d.chosen.empty()) {
     const bool tie =
         std::any_of(d.candidates.begin(), d.candidates.end(), [](const EffectCandidate& c) { return c.verdict == "tied"; });
     const bool fitted = std::any_of(d.candidates.begin(), d.candidates.end(),
                                     [](const EffectCandidate& c) { return c.tried && std::isfinite(c.error); });
-    unresolved = tie || (fitted && d.error_before > kUnexplainedRatio * floor);
+    unresolved = tie || (fitted && d.error_before > kUnexplainedRatio * floor_of(d, options));
   }
   return unresolved && per_candidate > 0 ? 2 * per_candidate : 0;
 }
