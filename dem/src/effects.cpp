@@ -42,12 +42,15 @@ std::vector<Effect> build_registry() {
   strength.search_scale = SearchScale::peak_normal_stress;
   strength.scaled_min = 0.03;
   strength.scaled_max = 3.0;
+  // A softening searched up to 10 mm comes as close as the range can to a perfectly plastic cap (the
+  // scene's 0), so a search may start there.
+  P softening{"crushing_softening", "m", "plastic closure over which the strength falls to zero (0: none)", 0,
+              kInf, 1e-4, 1e-2, true, 1e-3};
+  softening.probe_search_max = true;
   r.push_back({"crushing-cap",
                "compressive strength at the contact points with softening after it (toe crushing)",
                EffectTarget::joint_groups,
-               {strength,
-                P{"crushing_softening", "m", "plastic closure over which the strength falls to zero (0: none)", 0,
-                  kInf, 1e-4, 1e-2, true, 1e-3}}});
+               {strength, softening}});
   r.push_back({"support-compliance",
                "a support (abutment, base) on elastic springs instead of rigid",
                EffectTarget::support_blocks,

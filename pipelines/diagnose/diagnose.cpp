@@ -344,6 +344,9 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
 
 // Where in its search range each effect parameter is probed for the signature: from strong to mild.
 constexpr double kProbeFractions[] = {0.2, 0.5, 0.8};
+// Golden-section steps of the search of an effect's simplest form (search_range_ends): from a
+// bracket of half the range to about 3 % of it, within the reference arch's cap valley.
+constexpr int kRangeEndRefinements = 6;
 
 // A parameter's value at fraction t of its search range (geometric for log-scaled ones).
 double at_fraction(const dem::EffectParameter& p, double t) {
@@ -389,6 +392,56 @@ std::vector<std::vector<double>> probe_points(std::size_t parameters) {
     }
   return points;
 }
+
+}  // namespace
+
+std::vector<std::vector<double>> search_range_ends(const std::vector<dem::EffectParameter>& parameters,
+                                                   const std::function<double(const std::vector<double>&)>& error,
+                                                   int refinements) {
+  std::vector<std::vector<double>> run;
+  const auto run_at = [&](std::size_t end, std::size_t j, double t) {
+    std::vector<double> point(parameters.size(), 0.5);
+    point[end] = 1;
+    point[j] = t;
+    run.push_back(point);
+    const double e = error(point);
+    return std::isnan(e) ? std::numeric_limits<double>::infinity() : e;
+  };
+  constexpr double kGolden = 0.38196601125010515;  // (3 - sqrt(5)) / 2
+  for (std::size_t end = 0; end < parameters.size(); ++end) {
+    if (!parameters[end].probe_search_max) continue;
+    for (std::size_t j = 0; j < parameters.size(); ++j) {
+      if (j == end) continue;
+      // the bracket (a, b, c): b the best fraction run so far, a and c the fractions around it
+      double a = 0, b = kProbeFractions[0], c = kProbeFractions[1];
+      double best = run_at(end, j, kProbeFractions[0]);
+      for (int k = 1; k < 3; ++k) {
+        const double e = run_at(end, j, kProbeFractions[k]);
+        if (e < best) {
+          best = e;
+          a = kProbeFractions[k - 1];
+          b = kProbeFractions[k];
+          c = k + 1 < 3 ? kProbeFractions[k + 1] : 1.0;
+        }
+      }
+      for (int step = 0; step < refinements && std::isfinite(best); ++step) {
+        const bool right = c - b > b - a;  // the wider side
+        const double x = right ? b + kGolden * (c - b) : b - kGolden * (b - a);
+        const double e = run_at(end, j, x);
+        if (e < best) {
+          best = e;
+          (right ? a : c) = b;
+          b = x;
+        } else {
+          (right ? c : a) = x;
+        }
+      }
+    }
+  }
+  return run;
+}
+
+namespace {
 
 // `best` with every free parameter of `config` moved by k x 1e-7 of itself: a set that differs from
 // it by far less than anything physical (the scatter runs).
@@ -1303,6 +1356,10 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
                                               kProbeFractions[0], kProbeFractions[2]);
           if (!t.empty()) probe_at(t);
         }
+        // starts only, not signatures: a form the range holds at its end is no small change
+        search_range_ends(
+            m.parameters, [&](const std::vector<double>& t) { const Evaluation s = probe_at(t); return s.ok ? s.error : std::numeric_limits<double>::quiet_NaN(); },
+            kRangeEndRefinements);
         if (!signatures.empty()) c.signature_score = signature_score(residual, sensitivities, signatures);
         if (signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
         if (!c.target.empty())

@@ -236,6 +236,32 @@ TEST(Evidence, LinearisedProbesPointWhereTheResidualIsExplained) {
   EXPECT_TRUE(linearised_fractions(mid, {j}, {probes.begin(), probes.end() - 1}, 2, 0.2, 0.8).empty());  // a probe missing
 }
 
+// A crushing cap's simplest form, a plastic cap (the longest softening searched), is searched along
+// the strength on its own: three probes, then golden-section steps inside the bracket of the best.
+// The error has the arch's shape: far worse for a weak cap, a plateau where the cap never acts, and
+// a narrow valley between, which the three probes alone miss. No other effect has such a form.
+TEST(Evidence, ACapsPlasticFormIsSearchedAlongItsStrength) {
+  const auto& cap = dem::find_effect("crushing-cap").parameters;
+  ASSERT_EQ(cap.size(), 2u);
+  ASSERT_EQ(cap[1].name, "crushing_softening");
+  const auto error = [](const std::vector<double>& t) {
+    EXPECT_EQ(t[1], 1.0);  // the softening at the top of its range
+    const double x = t[0];  // the strength's fraction of its range
+    return x < 0.5 ? 1 + 10 * (0.5 - x) : std::min(1.0, 0.2 + 10 * std::abs(x - 0.66));
+  };
+  const auto run = search_range_ends(cap, error, 6);
+  ASSERT_EQ(run.size(), 9u);
+  EXPECT_EQ(run[0], (std::vector<double>{0.2, 1}));
+  EXPECT_EQ(run[2], (std::vector<double>{0.8, 1}));
+  double best = run.front()[0];
+  for (const auto& t : run)
+    if (error(t) < error({best, 1})) best = t[0];
+  EXPECT_NEAR(best, 0.66, 0.01);
+  for (const auto& e : dem::effect_registry())
+    if (e.name != "crushing-cap")
+      EXPECT_TRUE(search_range_ends(e.parameters, [](const std::vector<double>&) { return 0.0; }, 6).empty()) << e.name;
+}
+
 TEST(Evidence, HeldOutDataVetoesAFitThatSpoilsIt) {
   DiagnoseOptions o;  // tolerance: 10 % of the base error, or the noise when larger
   Diagnosis d;
