@@ -46,7 +46,7 @@ std::vector<Effect> build_registry() {
   // scene's 0), so a search may start there.
   P softening{"crushing_softening", "m", "plastic closure over which the strength falls to zero (0: none)", 0,
               kInf, 1e-4, 1e-2, true, 1e-3};
-  softening.probe_search_max = true;
+  softening.simplest_form_at_max = true;
   r.push_back({"crushing-cap",
                "compressive strength at the contact points with softening after it (toe crushing)",
                EffectTarget::joint_groups,

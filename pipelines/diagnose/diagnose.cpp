@@ -409,7 +409,7 @@ std::vector<std::vector<double>> search_range_ends(const std::vector<dem::Effect
   };
   constexpr double kGolden = 0.38196601125010515;  // (3 - sqrt(5)) / 2
   for (std::size_t end = 0; end < parameters.size(); ++end) {
-    if (!parameters[end].probe_search_max) continue;
+    if (!parameters[end].simplest_form_at_max) continue;
     for (std::size_t j = 0; j < parameters.size(); ++j) {
       if (j == end) continue;
       // the bracket (a, b, c): b the best fraction run so far, a and c the fractions around it
@@ -1357,9 +1357,11 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
           if (!t.empty()) probe_at(t);
         }
         // starts only, not signatures: a form the range holds at its end is no small change
-        search_range_ends(
-            m.parameters, [&](const std::vector<double>& t) { const Evaluation s = probe_at(t); return s.ok ? s.error : std::numeric_limits<double>::quiet_NaN(); },
-            kRangeEndRefinements);
+        const auto probe_error = [&](const std::vector<double>& t) {
+          const Evaluation s = probe_at(t);
+          return s.ok ? s.error : std::numeric_limits<double>::quiet_NaN();
+        };
+        search_range_ends(m.parameters, probe_error, kRangeEndRefinements);
         if (!signatures.empty()) c.signature_score = signature_score(residual, sensitivities, signatures);
         if (signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
         if (!c.target.empty())

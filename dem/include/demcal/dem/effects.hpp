@@ -38,12 +38,12 @@ struct EffectParameter {
   SearchScale search_scale = SearchScale::absolute;
   double scaled_min = 0;
   double scaled_max = 0;
-  // True where the top of the search range is the nearest the search comes to a form of the effect
-  // that the range itself cannot hold: crushing_softening, whose limit past any length is the
-  // scene's 0, a perfectly plastic cap (the cap's simplest form). Programs that probe an effect
-  // before searching it (demcal diagnose) probe it at search_max too, so that a search can start
-  // from that form when it fits best.
-  bool probe_search_max = false;
+  // True where the top of the search range is the nearest the search comes to the effect's simplest
+  // form, which the range itself cannot hold: crushing_softening, whose limit past any length is
+  // the scene's 0, a perfectly plastic cap. Programs that probe an effect
+  // before searching it also search that form, at search_max, along the effect's other parameters
+  // (demcal diagnose, pipelines::search_range_ends), so that a search can start from it.
+  bool simplest_form_at_max = false;
 };
 
 // The response of a structure, from a run of its model, that scaled search ranges refer to; 0 = unknown.
