@@ -257,9 +257,10 @@ TEST(Evidence, ACapsPlasticFormIsSearchedAlongItsStrength) {
   for (const auto& t : run)
     if (error(t) < error({best, 1})) best = t[0];
   EXPECT_NEAR(best, 0.66, 0.01);
-  for (const auto& e : dem::effect_registry())
-    if (e.name != "crushing-cap")
-      EXPECT_TRUE(search_range_ends(e.parameters, [](const std::vector<double>&) { return 0.0; }, 6).empty()) << e.name;
+  for (const auto& e : dem::effect_registry()) {
+    if (e.name == "crushing-cap") continue;
+    EXPECT_TRUE(search_range_ends(e.parameters, [](const std::vector<double>&) { return 0.0; }, 6).empty()) << e.name;
+  }
 }
 
 TEST(Evidence, HeldOutDataVetoesAFitThatSpoilsIt) {
