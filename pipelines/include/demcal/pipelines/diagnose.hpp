@@ -160,16 +160,16 @@ std::vector<double> linearised_fractions(const std::vector<double>& residual,
                                          double strong, double mild);
 
 // A search of an effect's simplest form where its search range only comes close to it
-// (dem::EffectParameter::simplest_form_at_max: a crushing cap's softening, whose top of range is the
-// nearest to a perfectly plastic cap). That form has one parameter fewer, and its valley can be
-// narrower than the signature probes' spacing (the reference arch's 0.5 MPa cap: within about 10 %
-// of the strength, over a 57-fold range), so it is searched on its own: with such a parameter at
-// fraction 1 of its range and the others mid-range, each other parameter in turn is run at the probe
-// fractions 0.2, 0.5 and 0.8, then narrowed by `refinements` golden-section steps inside the
-// bracket around the best of the three (within [0, 1]). `error` runs a point
-// (fractions of each parameter's range) and returns its error (NaN or infinity: a failed run).
-// The diagnosis runs it after the signature probes, as starts for the candidate's search, not as
-// signatures. Returns every point run, in order; none for an effect without such a parameter.
+// (dem::EffectParameter::simplest_form_at_max: a crushing cap's softening, whose top of range is
+// the nearest to a perfectly plastic cap). That form has one parameter fewer, and its valley can be
+// narrower than the signature probes' spacing (the reference arch's 0.5 MPa cap: met at 0.51-0.53
+// MPa, in a 57-fold range probed 3.4-fold apart), so it is searched on its own: with such a
+// parameter at fraction 1 of its range and the others mid-range, each other parameter in turn is
+// run at the probe fractions 0.2, 0.5 and 0.8, then narrowed by `refinements` golden-section steps
+// inside the bracket around the best of the three (within [0, 1]). `error` runs a point (fractions
+// of each parameter's range) and returns its error (NaN or infinity: a failed run). The diagnosis
+// runs it after the signature probes, as starts for the candidate's search, not as signatures.
+// Returns every point run, in order; none for an effect without such a parameter.
 std::vector<std::vector<double>> search_range_ends(const std::vector<dem::EffectParameter>& parameters,
                                                    const std::function<double(const std::vector<double>&)>& error,
                                                    int refinements);
