@@ -42,8 +42,7 @@ std::vector<Effect> build_registry() {
   strength.search_scale = SearchScale::peak_normal_stress;
   strength.scaled_min = 0.03;
   strength.scaled_max = 3.0;
-  // A softening searched up to 10 mm comes as close as the range can to a perfectly plastic cap (the
-  // scene's 0), so a search may start there.
+  // 10 mm of softening is the range's nearest to a perfectly plastic cap (the scene's 0).
   P softening{"crushing_softening", "m", "plastic closure over which the strength falls to zero (0: none)", 0,
               kInf, 1e-4, 1e-2, true, 1e-3};
   softening.simplest_form_at_max = true;

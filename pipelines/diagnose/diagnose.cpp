@@ -15,6 +15,7 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <iterator>
 #include <set>
 #include <sstream>
 
@@ -344,9 +345,9 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
 
 // Where in its search range each effect parameter is probed for the signature: from strong to mild.
 constexpr double kProbeFractions[] = {0.2, 0.5, 0.8};
-// Golden-section steps of the search of an effect's simplest form (search_range_ends): from a
+// Golden-section steps of the search of an effect's simplest form (search_simplest_form): from a
 // bracket of half the range to about 3 % of it, within the reference arch's cap valley.
-constexpr int kRangeEndRefinements = 6;
+constexpr int kSimplestFormRefinements = 6;
 
 // A parameter's value at fraction t of its search range (geometric for log-scaled ones).
 double at_fraction(const dem::EffectParameter& p, double t) {
@@ -395,9 +396,9 @@ std::vector<std::vector<double>> probe_points(std::size_t parameters) {
 
 }  // namespace
 
-std::vector<std::vector<double>> search_range_ends(const std::vector<dem::EffectParameter>& parameters,
-                                                   const std::function<double(const std::vector<double>&)>& error,
-                                                   int refinements) {
+std::vector<std::vector<double>> search_simplest_form(const std::vector<dem::EffectParameter>& parameters,
+                                                      const std::function<double(const std::vector<double>&)>& error,
+                                                      int refinements) {
   std::vector<std::vector<double>> run;
   const auto run_at = [&](std::size_t end, std::size_t j, double t) {
     std::vector<double> point(parameters.size(), 0.5);
@@ -415,13 +416,14 @@ std::vector<std::vector<double>> search_range_ends(const std::vector<dem::Effect
       // the bracket (a, b, c): b the best fraction run so far, a and c the fractions around it
       double a = 0, b = kProbeFractions[0], c = kProbeFractions[1];
       double best = run_at(end, j, kProbeFractions[0]);
-      for (int k = 1; k < 3; ++k) {
+      constexpr int probes = static_cast<int>(std::size(kProbeFractions));
+      for (int k = 1; k < probes; ++k) {
         const double e = run_at(end, j, kProbeFractions[k]);
         if (e < best) {
           best = e;
           a = kProbeFractions[k - 1];
           b = kProbeFractions[k];
-          c = k + 1 < 3 ? kProbeFractions[k + 1] : 1.0;
+          c = k + 1 < probes ? kProbeFractions[k + 1] : 1.0;
         }
       }
       for (int step = 0; step < refinements && std::isfinite(best); ++step) {
@@ -1361,7 +1363,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
           const Evaluation s = probe_at(t);
           return s.ok ? s.error : std::numeric_limits<double>::quiet_NaN();
         };
-        search_range_ends(m.parameters, probe_error, kRangeEndRefinements);
+        search_simplest_form(m.parameters, probe_error, kSimplestFormRefinements);
         if (!signatures.empty()) c.signature_score = signature_score(residual, sensitivities, signatures);
         if (signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
         if (!c.target.empty())

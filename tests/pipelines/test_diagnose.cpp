@@ -249,7 +249,7 @@ TEST(Evidence, ACapsPlasticFormIsSearchedAlongItsStrength) {
     const double x = t[0];  // the strength's fraction of its range
     return x < 0.5 ? 1 + 10 * (0.5 - x) : std::min(1.0, 0.2 + 10 * std::abs(x - 0.66));
   };
-  const auto run = search_range_ends(cap, error, 6);
+  const auto run = search_simplest_form(cap, error, 6);
   ASSERT_EQ(run.size(), 9u);
   EXPECT_EQ(run[0], (std::vector<double>{0.2, 1}));
   EXPECT_EQ(run[2], (std::vector<double>{0.8, 1}));
@@ -259,7 +259,7 @@ TEST(Evidence, ACapsPlasticFormIsSearchedAlongItsStrength) {
   EXPECT_NEAR(best, 0.66, 0.01);
   for (const auto& e : dem::effect_registry()) {
     if (e.name == "crushing-cap") continue;
-    EXPECT_TRUE(search_range_ends(e.parameters, [](const std::vector<double>&) { return 0.0; }, 6).empty()) << e.name;
+    EXPECT_TRUE(search_simplest_form(e.parameters, [](const std::vector<double>&) { return 0.0; }, 6).empty()) << e.name;
   }
 }
 

@@ -40,9 +40,9 @@ struct EffectParameter {
   double scaled_max = 0;
   // True where the top of the search range is the nearest the search comes to the effect's simplest
   // form, which the range itself cannot hold: crushing_softening, whose limit past any length is
-  // the scene's 0, a perfectly plastic cap. Programs that probe an effect
-  // before searching it also search that form, at search_max, along the effect's other parameters
-  // (demcal diagnose, pipelines::search_range_ends), so that a search can start from it.
+  // the scene's 0, a perfectly plastic cap. Programs that probe an effect before searching it
+  // also search that form, at search_max, along the effect's other parameters (demcal diagnose,
+  // pipelines::search_simplest_form), so that a search can start from it.
   bool simplest_form_at_max = false;
 };
 

@@ -170,9 +170,9 @@ std::vector<double> linearised_fractions(const std::vector<double>& residual,
 // of each parameter's range) and returns its error (NaN or infinity: a failed run). The diagnosis
 // runs it after the signature probes, as starts for the candidate's search, not as signatures.
 // Returns every point run, in order; none for an effect without such a parameter.
-std::vector<std::vector<double>> search_range_ends(const std::vector<dem::EffectParameter>& parameters,
-                                                   const std::function<double(const std::vector<double>&)>& error,
-                                                   int refinements);
+std::vector<std::vector<double>> search_simplest_form(const std::vector<dem::EffectParameter>& parameters,
+                                                      const std::function<double(const std::vector<double>&)>& error,
+                                                      int refinements);
 
 // How tightly the data pin one effect parameter of an accepted (or tied) fit. The parameter is
 // moved from the best by factors 1/10, 1/3, 3 and 10 when log-scaled, by -0.3, -0.1, +0.1 and +0.3
