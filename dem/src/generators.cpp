@@ -1,5 +1,7 @@
 #include "demcal/dem/generators.hpp"
 
+#include "demcal/limits/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -17,6 +19,18 @@ const double kFlatSpringingAngle = 2 * ContactSettings{}.edge_angle_tolerance;
 
 void check(bool ok, const std::string& flag, const std::string& rule, double value) {
   if (!ok) throw SceneError(flag, rule + ", got " + std::to_string(value));
+}
+
+// Refuses a derived count over its limit (demcal/limits): `flags` names what the user typed.
+void check_limit(limits::Limit limit, double count, const std::string& flags, const std::string& what) {
+  if (auto m = limits::check(limit, count)) throw SceneError(flags, what + ": " + *m);
+}
+
+// Rows recorded over the actuator's travel (0: the generator's default interval, always within).
+void check_recorded_rows(double record_interval, double max_displacement) {
+  if (record_interval > 0)
+    check_limit(limits::Limit::recorded_rows, max_displacement / record_interval, "--record-interval",
+                limits::number_text(record_interval) + " m over " + limits::number_text(max_displacement) + " m of travel");
 }
 
 JointMaterial material(double kn, double ks, double friction_deg) {
@@ -105,6 +119,7 @@ void ArchOptions::Validate() const {
   check(thickness > 0 && std::isfinite(thickness), "--thickness", "must be positive", thickness);
   check(width > 0 && std::isfinite(width), "--width", "must be positive", width);
   check(voussoirs >= 3, "--voussoirs", "must be at least 3", voussoirs);
+  check_limit(limits::Limit::blocks, voussoirs + 2.0, "--voussoirs", std::to_string(voussoirs) + " voussoirs and 2 abutments");
   check(density > 0 && std::isfinite(density), "--density", "must be positive", density);
   check(kn > 0 && std::isfinite(kn), "--kn", "must be positive", kn);
   check(ks > 0 && std::isfinite(ks), "--ks", "must be positive", ks);
@@ -118,6 +133,7 @@ void ArchOptions::Validate() const {
   check(max_time >= 0 && std::isfinite(max_time), "--max-time", "must not be negative", max_time);
   check(record_interval >= 0 && record_interval <= max_displacement, "--record-interval",
         "must be in [0, --max-displacement]", record_interval);
+  check_recorded_rows(record_interval, max_displacement);
   if (load != "point" && load != "none") throw SceneError("--load", "must be point or none, got '" + load + "'");
 }
 
@@ -195,6 +211,7 @@ void SemicircularArchOptions::Validate() const {
   check(radius > 0 && std::isfinite(radius), "--radius", "must be positive", radius);
   check(thickness_ratio > 0 && thickness_ratio < 1, "--thickness-ratio", "must be in (0, 1)", thickness_ratio);
   check(voussoirs >= 3, "--voussoirs", "must be at least 3", voussoirs);
+  check_limit(limits::Limit::blocks, voussoirs + 2.0, "--voussoirs", std::to_string(voussoirs) + " voussoirs and 2 supports");
   check(width > 0 && std::isfinite(width), "--width", "must be positive", width);
   check(density > 0 && std::isfinite(density), "--density", "must be positive", density);
   check(kn > 0 && std::isfinite(kn), "--kn", "must be positive", kn);
@@ -237,6 +254,10 @@ void WallOptions::Validate() const {
   check(thickness > 0 && std::isfinite(thickness), "--thickness", "must be positive", thickness);
   check(unit_height > 0 && unit_height <= height, "--unit-height", "must be in (0, height]", unit_height);
   check(unit_length > 0 && unit_length <= length, "--unit-length", "must be in (0, length]", unit_length);
+  // Courses x units per course, before a block is made (a wall of 1e6 x 1e6 units is refused here).
+  const double courses = std::max(1.0, std::round(height / unit_height)), per_course = std::ceil(length / unit_length) + 1;
+  check_limit(limits::Limit::blocks, courses * per_course + 2, "--height/--unit-height/--length/--unit-length",
+              "a wall of " + limits::number_text(courses) + " courses of up to " + limits::number_text(per_course) + " units");
   check(density > 0 && std::isfinite(density), "--density", "must be positive", density);
   check(precompression_mpa >= 0 && std::isfinite(precompression_mpa), "--precompression", "must not be negative",
         precompression_mpa);
@@ -254,6 +275,7 @@ void WallOptions::Validate() const {
         actuator_stiffness);
   check(record_interval >= 0 && record_interval <= max_displacement, "--record-interval",
         "must be in [0, --max-displacement]", record_interval);
+  check_recorded_rows(record_interval, max_displacement);
 }
 
 Scene make_wall(const WallOptions& o) {

@@ -2,6 +2,8 @@
 
 #include "geometry.hpp"
 
+#include "demcal/limits/limits.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -165,6 +167,8 @@ void Scene::Validate(const std::string& source) const {
   require_finite(gravity.x(), s + "gravity[0]");
   require_finite(gravity.y(), s + "gravity[1]");
   if (blocks.empty()) throw SceneError(s + "blocks", "the scene has no blocks");
+  if (auto m = limits::check(limits::Limit::blocks, static_cast<double>(blocks.size())))
+    throw SceneError(s + "blocks", *m);
   if (joint_groups.empty()) throw SceneError(s + "joint_groups", "at least one joint group is needed");
   for (const auto& [group, material] : joint_groups) material.Validate(s + "joint_groups." + group);
   if (!default_joint_group.empty() && !joint_groups.count(default_joint_group))
@@ -187,6 +191,8 @@ void Scene::Validate(const std::string& source) const {
     if (!names.insert(b.name).second) throw SceneError(where, "duplicate block name");
     require_positive(b.density, where + ".density");
     if (b.vertices.size() < 3) throw SceneError(where + ".vertices", "a block needs at least 3 vertices");
+    if (auto m = limits::check(limits::Limit::vertices_per_block, static_cast<double>(b.vertices.size())))
+      throw SceneError(where + ".vertices", *m);
     for (std::size_t v = 0; v < b.vertices.size(); ++v) {
       require_finite(b.vertices[v].x(), where + ".vertices[" + std::to_string(v) + "]");
       require_finite(b.vertices[v].y(), where + ".vertices[" + std::to_string(v) + "]");
@@ -278,6 +284,9 @@ void Scene::Validate(const std::string& source) const {
     require_positive(l.max_displacement, s + "loading.max_displacement");
     require_non_negative(l.stiffness, s + "loading.stiffness");
     require_positive(l.record_interval, s + "loading.record_interval");
+    if (auto m = limits::check(limits::Limit::recorded_rows, l.max_displacement / l.record_interval))
+      throw SceneError(s + "loading.record_interval", limits::number_text(l.record_interval) + " m over " +
+                                                          limits::number_text(l.max_displacement) + " m of travel: " + *m);
   }
   for (std::size_t f = 0; f < l.constant_forces.size(); ++f) {
     const std::string where = s + "loading.constant_forces[" + std::to_string(f) + "]";
@@ -341,6 +350,8 @@ Scene scene_from_json(const json& j, const std::string& source) {
 
   const json& blocks = root.required("blocks");
   if (!blocks.is_array()) throw SceneError(at("blocks"), "expected an array of blocks");
+  if (auto m = limits::check(limits::Limit::blocks, static_cast<double>(blocks.size())))
+    throw SceneError(at("blocks"), *m);
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     const ObjectReader b(blocks[i], at("blocks[" + std::to_string(i) + "]"));
     Block block;
@@ -356,6 +367,8 @@ Scene scene_from_json(const json& j, const std::string& source) {
     block.beam_kr = b.number("beam_kr", 0);
     const json& vertices = b.required("vertices");
     if (!vertices.is_array()) throw SceneError(b.key_path("vertices"), "expected an array of [x, y]");
+    if (auto m = limits::check(limits::Limit::vertices_per_block, static_cast<double>(vertices.size())))
+      throw SceneError(b.key_path("vertices"), *m);
     for (std::size_t v = 0; v < vertices.size(); ++v)
       block.vertices.push_back(ObjectReader::to_vec2(vertices[v], b.key_path("vertices[" + std::to_string(v) + "]")));
     scene.blocks.push_back(std::move(block));
@@ -510,6 +523,7 @@ json scene_to_json(const Scene& scene) {
 }
 
 Scene load_scene(const std::string& path) {
+  if (auto m = limits::check_file_size(path)) throw SceneError(path, *m);
   std::ifstream in(path);
   if (!in) throw SceneError(path, "cannot open the scene file");
   json j;

@@ -3,6 +3,8 @@
 #include "contact_law.hpp"
 #include "geometry.hpp"
 
+#include "demcal/limits/limits.hpp"
+
 #include <Eigen/Geometry>
 
 #include <algorithm>
@@ -175,6 +177,7 @@ class Engine {
   }
 
   Recording run(const RunControl& control);
+  double time_step() const { return dt_; }
 
  private:
   void build_bodies();
@@ -1176,6 +1179,13 @@ void Engine::finish(Recording& rec) const {
 Recording simulate(const Scene& scene, const RunControl& control) {
   scene.Validate(scene.name);
   Engine engine(scene);
+  // The steps the run may take at its first time step, refused before the first one.
+  const double steps = (scene.solver.max_equilibrium_time + scene.solver.max_time) / engine.time_step();
+  if (auto m = limits::check(limits::Limit::time_steps, steps))
+    throw SceneError(scene.name + ": solver.max_time",
+                     limits::number_text(scene.solver.max_time) + " s (and " +
+                         limits::number_text(scene.solver.max_equilibrium_time) + " s to equilibrium) at a time step of " +
+                         limits::number_text(engine.time_step()) + " s: " + *m);
   return engine.run(control);
 }
 

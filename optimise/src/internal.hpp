@@ -1,6 +1,7 @@
 // Private helpers of the optimise module (random numbers, JSON of doubles and vectors, factories).
 #pragma once
 
+#include "demcal/limits/limits.hpp"
 #include "demcal/optimise/optimiser.hpp"
 
 #include <Eigen/Core>

@@ -65,6 +65,13 @@ void OptimiserOptions::Validate() const {
   if (population < 2) fail("option population = " + std::to_string(population) + " must be >= 2");
   if (iterations < 1) fail("option iterations = " + std::to_string(iterations) + " must be >= 1");
   if (max_evaluations < 0) fail("option max_evaluations = " + std::to_string(max_evaluations) + " must be >= 0");
+  limits::require_within(limits::Limit::population, population, "option population");
+  limits::require_within(limits::Limit::population, nlopt_population, "option nlopt_population");
+  limits::require_within(limits::Limit::iterations, iterations, "option iterations");
+  if (max_evaluations > 0)
+    limits::require_within(limits::Limit::evaluations, max_evaluations, "option max_evaluations");
+  else
+    limits::require_within(limits::Limit::evaluations, 1.0 * population * iterations, "option population x iterations");
   if (std::isnan(target_value)) fail("option target_value is NaN");
   auto finite_nonnegative = [](double v, const char* name) {
     if (!std::isfinite(v) || v < 0.0) fail(std::string("option ") + name + " = " + fmt(v) + " must be finite and >= 0");
@@ -248,6 +255,7 @@ void PolishOptions::Validate() const {
   if (detail::nlopt_name_from_algorithm("nlopt:" + algorithm).empty())
     fail("polish algorithm '" + algorithm + "' is not a known NLopt algorithm");
   if (max_evaluations <= 0) fail("polish max_evaluations = " + std::to_string(max_evaluations) + " must be > 0");
+  limits::require_within(limits::Limit::evaluations, max_evaluations, "polish max_evaluations");
   if (!(initial_step > 0.0) || !std::isfinite(initial_step))
     fail("polish initial_step = " + fmt(initial_step) + " must be finite and > 0");
   if (!(xtol_rel >= 0.0) || !std::isfinite(xtol_rel)) fail("polish xtol_rel = " + fmt(xtol_rel) + " must be >= 0");

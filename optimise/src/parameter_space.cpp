@@ -123,6 +123,8 @@ std::map<std::string, double> ParameterSpace::values(const Eigen::VectorXd& phys
 
 void ParameterSpace::Validate() const {
   if (free_.empty()) fail("parameter space: no free parameters");
+  limits::require_within(limits::Limit::parameters, static_cast<double>(free_.size() + fixed_.size() + (tied_ ? 1 : 0)),
+                         "parameter space");
   std::set<std::string> names;
   auto claim = [&](const std::string& name, const char* kind) {
     if (name.empty()) fail(std::string("parameter space: a ") + kind + " parameter has an empty name");

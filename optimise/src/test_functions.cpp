@@ -1,4 +1,5 @@
 #include "demcal/optimise/test_functions.hpp"
+#include "internal.hpp"
 
 #include <cmath>
 #include <stdexcept>
@@ -12,6 +13,7 @@ const std::vector<std::string>& test_function_names() {
 
 TestFunction make_test_function(const std::string& name, int dimension, bool shifted) {
   if (dimension < 1) throw std::invalid_argument("test function dimension " + std::to_string(dimension) + " must be >= 1");
+  limits::require_within(limits::Limit::parameters, dimension, "test function dimension");
   TestFunction f;
   f.name = name;
   f.dimension = dimension;

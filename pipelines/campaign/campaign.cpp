@@ -2,6 +2,7 @@
 #include "demcal/pipelines/campaign.hpp"
 
 #include "campaign_internal.hpp"
+#include "demcal/limits/limits.hpp"
 #include "demcal/pipelines/archive.hpp"
 #include "demcal/pipelines/backend.hpp"
 #include "demcal/pipelines/mpi.hpp"
@@ -119,6 +120,8 @@ SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCas
     };
   }
   if (s.screening && !config.surrogate.model_file.empty()) {
+    if (auto m = limits::check_file_size(config.surrogate.model_file))
+      throw CampaignError(config.surrogate.model_file + ": " + *m);
     std::ifstream in(config.surrogate.model_file);
     try {
       s.trained_model = surrogate::SurrogateModel::from_json(json::parse(in), config.surrogate.model_file);

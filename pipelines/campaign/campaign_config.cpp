@@ -2,6 +2,7 @@
 #include "demcal/pipelines/campaign.hpp"
 
 #include "demcal/dem/generators.hpp"
+#include "demcal/limits/limits.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -70,6 +71,7 @@ std::string resolve(const std::string& path, const std::string& base_dir) {
 }
 
 std::string file_hash(const std::string& path) {
+  if (auto m = limits::check_file_size(path)) throw CampaignError(path + ": " + *m);
   std::ifstream in(path, std::ios::binary);
   std::ostringstream buffer;
   buffer << in.rdbuf();
@@ -320,6 +322,7 @@ void parse_surrogate(const json& j, SurrogateSpec& spec, const std::string& wher
     fs::path file = model.get<std::string>();
     if (file.is_relative()) file = fs::path(base_dir) / file;
     spec.model_file = file.string();
+    if (auto m = limits::check_file_size(spec.model_file)) throw CampaignError(where + ".model: " + spec.model_file + ": " + *m);
     options.erase("model");
     // Without a "kind", the model's own kind.
     if (const std::string kind = surrogate_model_kind(spec.model_file); !options.contains("kind") && !kind.empty())
@@ -385,6 +388,10 @@ void CampaignConfig::Validate() const {
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))
     throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + number_text(backend.timeout_s));
+  for (const auto& [key, workers] : {std::pair{"backend.threads", backend.threads}, {"backend.parallel", backend.parallel},
+                                     {"backend.fitness_threads", backend.fitness_threads}})
+    if (auto m = limits::check(limits::Limit::workers, workers))
+      throw CampaignError(source + ": " + key + ": " + *m);
   if (!(backend.max_output_mb > 0) || !(backend.max_output_mb <= 1048576))
     throw CampaignError(source + ": backend.max_output_mb: must be > 0 and <= 1048576 (1 TiB), got " +
                         number_text(backend.max_output_mb));
@@ -549,6 +556,7 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
 }
 
 CampaignConfig load_campaign(const std::string& path) {
+  if (auto m = limits::check_file_size(path)) throw CampaignError(path + ": " + *m);
   std::ifstream in(path);
   if (!in) throw CampaignError(path + ": cannot open the campaign file");
   json j;

@@ -2,6 +2,7 @@
 
 #include "campaign_internal.hpp"
 
+#include "demcal/limits/limits.hpp"
 #include "demcal/pipelines/backend.hpp"
 #include "demcal/smoothing/objective.hpp"
 
@@ -120,6 +121,7 @@ json CasePrediction::to_json() const {
 }
 
 std::map<std::string, double> read_result_parameters(const std::string& path) {
+  if (auto m = limits::check_file_size(path)) throw CampaignError(path + ": " + *m);
   std::ifstream in(path);
   if (!in) throw CampaignError(path + ": cannot read the result file");
   json j;

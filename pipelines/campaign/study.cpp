@@ -1,5 +1,6 @@
 #include "demcal/pipelines/study.hpp"
 
+#include "demcal/limits/limits.hpp"
 #include "demcal/pipelines/report.hpp"
 
 #include <algorithm>
@@ -87,6 +88,9 @@ void StudyConfig::Validate() const {
   campaign.Validate();
   if (methods.empty()) throw CampaignError(source + ": no algorithms");
   if (seeds.empty()) throw CampaignError(source + ": no seeds");
+  if (auto m = limits::check(limits::Limit::campaigns, static_cast<double>(methods.size()) * seeds.size()))
+    throw CampaignError(source + ": " + std::to_string(methods.size()) + " methods x " + std::to_string(seeds.size()) +
+                        " seeds: " + *m);
   std::set<std::uint64_t> seen_seeds;
   for (const auto seed : seeds)
     if (!seen_seeds.insert(seed).second) throw CampaignError(source + ": seed " + std::to_string(seed) + " is listed twice");
@@ -194,6 +198,7 @@ StudyConfig study_from_json(const json& j, const std::string& base, const std::s
 }
 
 StudyConfig load_study(const std::string& path) {
+  if (auto m = limits::check_file_size(path)) throw CampaignError(path + ": " + *m);
   std::ifstream in(path);
   if (!in) throw CampaignError(path + ": cannot open the study file");
   json j;

@@ -4,6 +4,7 @@
 #include "diagnose_internal.hpp"
 
 #include "demcal/dem/effects.hpp"
+#include "demcal/limits/limits.hpp"
 #include "demcal/pipelines/predict.hpp"
 #include "demcal/pipelines/surrogate_data.hpp"
 #include "demcal/smoothing/objective.hpp"
@@ -49,6 +50,15 @@ void DiagnoseOptions::Validate() const {
   if (continued_evaluations < -1)
     fail("continued_evaluations", std::to_string(continued_evaluations), "must be >= 0 (-1: a candidate's budget)");
   if (scatter_runs < 0) fail("scatter_runs", std::to_string(scatter_runs), "must be >= 0");
+  const auto bounded = [&](const std::string& field, long value) {
+    if (auto m = limits::check(limits::Limit::evaluations, static_cast<double>(value)))
+      fail(field, std::to_string(value), *m);
+  };
+  bounded("max_simulations", max_simulations);
+  bounded("candidate_evaluations", candidate_evaluations);
+  bounded("profile_evaluations", profile_evaluations);
+  bounded("continued_evaluations", continued_evaluations);
+  bounded("scatter_runs", scatter_runs);
   if (!(scatter_floor_ratio > 0)) fail("scatter_floor_ratio", std::to_string(scatter_floor_ratio), "must be > 0");
   if (!(noise_level_ratio >= 1)) fail("noise_level_ratio", std::to_string(noise_level_ratio), "must be >= 1");
   if (!(held_out_tolerance >= 0)) fail("held_out_tolerance", std::to_string(held_out_tolerance), "must be >= 0");

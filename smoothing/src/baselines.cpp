@@ -2,6 +2,8 @@
 #include "demcal/smoothing/objective.hpp"
 #include "demcal/smoothing/smoother.hpp"
 
+#include "demcal/limits/limits.hpp"
+
 #include <Eigen/Dense>
 
 #include <algorithm>
@@ -35,6 +37,7 @@ double integral(const XYSeries& e, double a, double b) {
 
 XYSeries discretise(const XYSeries& input, int points) {
   if (points < 2) throw std::invalid_argument("discretise: points = " + std::to_string(points) + ", must be >= 2");
+  limits::require_within(limits::Limit::curve_points, points, "discretise: points");
   const XYSeries e = loading_envelope(input);
   if (e.x.size() < 2)
     throw CurveError("the curve has " + std::to_string(e.x.size()) +

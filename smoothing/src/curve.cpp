@@ -1,6 +1,8 @@
 // Curve reading and writing (see curve.hpp for the accepted format).
 #include "demcal/smoothing/curve.hpp"
 
+#include "demcal/limits/limits.hpp"
+
 #include <algorithm>
 #include <array>
 #include <charconv>
@@ -284,6 +286,8 @@ Curve parse_curve(const std::string& text, const std::string& source, const Curv
     throw CurveError(source + ": line " + std::to_string(lines[names_index + 1].first) + ": " +
                      std::to_string(units.size()) + " units for " + std::to_string(name_cells.size()) + " columns");
 
+  if (auto m = limits::check(limits::Limit::curve_rows, static_cast<double>(lines.size() - first_data)))
+    throw CurveError(source + ": line " + std::to_string(lines[first_data].first) + " on: " + *m);
   const std::size_t ncol = curve.columns.size();
   std::size_t finite_rows = 0;
   for (std::size_t i = first_data; i < lines.size(); ++i) {
@@ -320,6 +324,7 @@ Curve parse_curve(const std::string& text, const std::string& source, const Curv
 }
 
 Curve read_curve(const std::string& path, const CurveReadOptions& options) {
+  if (auto m = limits::check_file_size(path)) throw CurveError(path + ": " + *m);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw CurveError(path + ": cannot open the file for reading");
   std::ostringstream buffer;

@@ -3,6 +3,8 @@
 // the LibTorch plugin (plugin/libtorch_training.cpp); what both share is in training_common.cpp.
 #include "mlp_training.hpp"
 
+#include "demcal/limits/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -103,6 +105,11 @@ void SmootherOptions::Validate() const {
     fail("trend_cutoff", trend_cutoff, "must be in [1, points - 2]");
   if (!(first_layer_gain > 0) || !std::isfinite(first_layer_gain))
     fail("first_layer_gain", first_layer_gain, "must be finite and > 0");
+  limits::require_within(limits::Limit::curve_points, points, "SmootherOptions.points");
+  limits::require_within(limits::Limit::epochs, epochs, "SmootherOptions.epochs");
+  limits::require_within(limits::Limit::workers, threads, "SmootherOptions.threads");
+  limits::require_within(limits::Limit::network_weights, 1.0 * hidden_width * hidden_width * hidden_layers,
+                         "SmootherOptions.hidden_layers x hidden_width^2");
 }
 
 std::vector<SmoothResult> smooth_batch(const std::vector<XYSeries>& inputs, const SmootherOptions& options) {

@@ -1,6 +1,8 @@
 // Loading envelope, interpolation, objective functions 1 and 2.
 #include "demcal/smoothing/objective.hpp"
 
+#include "demcal/limits/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -38,6 +40,7 @@ ObjectiveWindow parse_objective_window(const std::string& name) {
 void ObjectiveOptions::Validate() const {
   if (points < 2)
     throw std::invalid_argument("ObjectiveOptions.points = " + std::to_string(points) + ": must be >= 2");
+  limits::require_within(limits::Limit::curve_points, points, "ObjectiveOptions.points");
   if (force_column.empty()) throw std::invalid_argument("ObjectiveOptions.force_column is empty");
   for (const auto& [name, w] : channel_weights)
     if (!(w >= 0) || !std::isfinite(w))

@@ -54,6 +54,9 @@ void MlpOptions::Validate() const {
   if (!(final_learning_rate > 0) || final_learning_rate > learning_rate)
     fail("final_learning_rate = " + format_number(final_learning_rate) + " must be in (0, learning_rate]");
   if (!(weight_decay >= 0) || !std::isfinite(weight_decay)) fail("weight_decay = " + format_number(weight_decay) + " must be >= 0");
+  limits::require_within(limits::Limit::epochs, epochs, "surrogate mlp.epochs");
+  limits::require_within(limits::Limit::network_weights, 1.0 * members * hidden_layers * hidden_width * hidden_width,
+                         "surrogate mlp.members x hidden_layers x hidden_width^2");
 }
 
 nlohmann::json MlpOptions::to_json() const {

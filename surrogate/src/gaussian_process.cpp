@@ -158,6 +158,7 @@ void GpOptions::Validate() const {
   if (restarts < 1) throw std::invalid_argument("gp option restarts = " + std::to_string(restarts) + " must be >= 1");
   if (max_iterations < 10)
     throw std::invalid_argument("gp option max_iterations = " + std::to_string(max_iterations) + " must be >= 10");
+  limits::require_within(limits::Limit::iterations, 1.0 * restarts * max_iterations, "gp options restarts x max_iterations");
   if (!(min_length > 0) || !(max_length > min_length) || !std::isfinite(max_length))
     throw std::invalid_argument("gp options min_length = " + format_number(min_length) + ", max_length = " + format_number(max_length) +
                                 " must satisfy 0 < min_length < max_length");

@@ -2,6 +2,8 @@
 // splitmix64 mixer, reading an options struct).
 #pragma once
 
+#include "demcal/limits/limits.hpp"
+
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 

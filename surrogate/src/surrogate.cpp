@@ -129,6 +129,10 @@ void SurrogateOptions::Validate() const {
   if (min_runs < 3) throw std::invalid_argument("surrogate min_runs = " + std::to_string(min_runs) + " must be >= 3");
   if (max_training_runs < 10)
     throw std::invalid_argument("surrogate max_training_runs = " + std::to_string(max_training_runs) + " must be >= 10");
+  limits::require_within(limits::Limit::training_rows, max_training_runs, "surrogate max_training_runs");
+  limits::require_within(limits::Limit::training_rows, min_runs, "surrogate min_runs");
+  limits::require_within(limits::Limit::population, pool_factor, "surrogate pool_factor (candidates ranked per simulated one)");
+  limits::require_within(limits::Limit::population, k, "surrogate k");
   gp.Validate();
   mlp.Validate();
 }
