@@ -22,14 +22,8 @@ using nlohmann::json;
 
 namespace {
 
-std::string read_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str();
-}
-
-void write_text(const fs::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
+using test_support::read_text;
+using test_support::write_text;
 
 void sql(const fs::path& path, const std::string& statements) {
   sqlite3* db = nullptr;
@@ -38,26 +32,10 @@ void sql(const fs::path& path, const std::string& statements) {
   sqlite3_close(db);
 }
 
-// A measured curve in the layout of the toy simulator (top_horizontal in m, force in N).
-std::string measured_text() {
-  std::string text = "top_horizontal,force\n";
-  for (int i = 0; i <= 20; ++i) text += std::to_string(0.0005 * i) + "," + std::to_string(6000.0 * i / (i + 2.0)) + "\n";
-  return text;
-}
+using test_support::toy_measured_text;
 
 // A valid, tiny campaign through the toy simulator; each entry breaks one thing.
-json good_campaign(const fs::path& dir) {
-  return {{"name", "bad-input"},
-          {"measured", (dir / "measured.csv").string()},
-          {"parameters", {{{"name", "k"}, {"lower", 1e6}, {"upper", 1e8}, {"scale", "log"}},
-                          {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
-          {"objective", 1},
-          {"optimiser", {{"algorithm", "pso"}, {"population", 2}, {"iterations", 1}, {"seed", 1}}},
-          {"backend", {{"type", "command"},
-                       {"command", test_support::python() + " " + test_support::kToySimulator + " {k} {friction_deg} {output}"},
-                       {"parallel", 1}}},
-          {"report", false}};
-}
+json good_campaign(const fs::path& dir) { return test_support::toy_campaign(dir, "bad-input"); }
 
 struct Entry {
   std::string id;
@@ -234,7 +212,7 @@ std::string replace_dir(std::string text, const fs::path& dir) {
 TEST_P(BadInput, MessageNamesWhereAndWhat) {
   const Entry& entry = GetParam();
   const auto dir = test_support::fresh_dir("bad-input", entry.id);
-  write_text(dir / "measured.csv", measured_text());
+  write_text(dir / "measured.csv", toy_measured_text());
   if (entry.id.rfind("archive_", 0) == 0) {
     // Archives the entries point at.
     write_text(dir / "junk.sqlite", "this is a text file, not an SQLite database\n" + std::string(2000, 'x'));

@@ -1151,6 +1151,51 @@ INSTANTIATE_TEST_SUITE_P(DISABLED_RoundOff, CompliantSupport, ::testing::ValuesI
 INSTANTIATE_TEST_SUITE_P(DISABLED_RoundOff, HiddenCohesion, ::testing::ValuesIn(round_off_realisations()),
                          test_support::realisation_name);
 
+// Every stage of the loop on the smallest search that still runs each of them (one free base
+// parameter, one candidate, a few runs per calibration, the command-line tests' faster arch at 3
+// points per joint): what must hold whatever the verdict. The loop's reduced form in the sanitized
+// build (docs/hardening.md), where the loop tests above take hours; it runs in both builds.
+TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "small");
+  dem::ArchOptions arch = cli_arch();
+  arch.contacts_per_joint = 3;
+  arch.max_displacement = 0.004;
+  const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 3, arch);
+  json j = fast_campaign("small", measured, {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}},
+                         {{"kn", 2.6e9}, {"ks", 0.9e9}});
+  j["scene"]["options"]["contacts_per_joint"] = arch.contacts_per_joint;
+  j["scene"]["options"]["max_displacement"] = arch.max_displacement;
+  j["optimiser"]["iterations"] = 2;
+  j["output"] = (dir / "unused").string();
+  DiagnoseOptions o;
+  o.output = (dir / "out").string();
+  o.effects = {"support-compliance"};
+  o.candidate_evaluations = 8;  // two populations, the least a candidate is calibrated with
+  o.profile_evaluations = 2;
+  o.progress = false;
+  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "small.json"), o);
+  ASSERT_EQ(d.status, "completed") << d.message;
+  EXPECT_TRUE(std::isfinite(d.error_before));
+  EXPECT_TRUE(std::isfinite(d.error_after));
+  EXPECT_FALSE(d.verdict.empty());
+  EXPECT_FALSE(d.base_residuals.empty());
+  ASSERT_EQ(d.candidates.size(), 1u);
+  const EffectCandidate& c = d.candidates.front();
+  EXPECT_TRUE(c.tried) << c.reason;
+  EXPECT_TRUE(c.verdict == "accepted" || c.verdict == "rejected" || c.verdict == "tied") << c.verdict;
+  EXPECT_FALSE(c.reason.empty());
+  EXPECT_EQ(c.residuals.size(), d.base_residuals.size());
+  EXPECT_GT(c.params.size(), d.base_params.size());
+  EXPECT_EQ(d.chosen.empty(), c.verdict != "accepted") << d.verdict;
+  EXPECT_GT(d.simulations, 0);
+  EXPECT_LE(d.simulated_this_session, d.simulations);  // a set met twice is read from the archive
+  const json written = test_support::read_json(dir / "out" / "diagnosis.json");
+  for (const char* key : {"base", "noise", "scatter", "effective_points", "candidates", "chosen", "error_before", "error_after"})
+    EXPECT_TRUE(written.contains(key)) << key;
+  for (const char* file : {"report.md", "archive.sqlite", "base/result.json"}) EXPECT_TRUE(fs::exists(dir / "out" / file)) << file;
+  EXPECT_TRUE(fs::exists(dir / "out" / "candidates" / "support-compliance" / "result.json"));
+}
+
 TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   // Bad input first: an unknown effect is named in the message, before any simulation.
   const fs::path dir = test_support::fresh_dir("diagnose", "cli");

@@ -21,33 +21,12 @@ using nlohmann::json;
 
 namespace {
 
-std::string read_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str();
-}
+using test_support::read_text;
+using test_support::write_text;
 
-void write_text(const fs::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
+using test_support::toy_measured_text;
 
-std::string measured_text(int rows) {
-  std::string text = "top_horizontal,force\n";
-  for (int i = 0; i <= rows; ++i) text += std::to_string(0.0005 * i) + "," + std::to_string(6000.0 * i / (i + 2.0)) + "\n";
-  return text;
-}
-
-// A valid campaign through the toy simulator, as the bad-input catalogue's.
-json toy_campaign(const fs::path& dir) {
-  return {{"name", "limits"},
-          {"measured", (dir / "measured.csv").string()},
-          {"parameters", {{{"name", "k"}, {"lower", 1e6}, {"upper", 1e8}, {"scale", "log"}}}},
-          {"objective", 1},
-          {"optimiser", {{"algorithm", "pso"}, {"population", 2}, {"iterations", 1}, {"seed", 1}}},
-          {"backend", {{"type", "command"},
-                       {"command", test_support::python() + " " + test_support::kToySimulator + " {k} 30 {output}"},
-                       {"parallel", 1}}},
-          {"report", false}};
-}
+json toy_campaign(const fs::path& dir) { return test_support::toy_campaign(dir, "limits"); }
 
 // A valid scene file (the default arch, 15 blocks) made by the CLI.
 fs::path arch_scene(const fs::path& dir) {
@@ -134,14 +113,14 @@ std::vector<Entry> catalogue() {
       // ---- curves ----
       {"csv_file_bytes",
        [](const fs::path& dir) {
-         write_text(dir / "big.csv", measured_text(20));
+         write_text(dir / "big.csv", toy_measured_text());
          fs::resize_file(dir / "big.csv", 1ll << 30);
          return std::vector<std::string>{"smooth", (dir / "big.csv").string(), "--out", (dir / "s.csv").string()};
        },
        {"{dir}/big.csv", "1073741824 bytes exceed the limit of 268435456"}},
       {"csv_rows",
        [](const fs::path& dir) {
-         write_text(dir / "m.csv", measured_text(20));
+         write_text(dir / "m.csv", toy_measured_text());
          return std::vector<std::string>{"smooth", (dir / "m.csv").string(), "--out", (dir / "s.csv").string()};
        },
        {"{dir}/m.csv: line 2 on", "21 data rows exceed the limit of 10", "--limit curve_rows=N"}, "curve_rows=10"},
@@ -184,7 +163,7 @@ std::vector<Entry> catalogue() {
        {"2 methods x 2 seeds", "4 campaigns exceed the limit of 3", "--limit campaigns=N"}, "campaigns=3"},
       {"campaign_file_bytes",
        [](const fs::path& dir) {
-         write_text(dir / "measured.csv", measured_text(20));
+         write_text(dir / "measured.csv", toy_measured_text());
          write_text(dir / "campaign.json", toy_campaign(dir).dump());
          fs::resize_file(dir / "campaign.json", 1ll << 30);
          return std::vector<std::string>{"calibrate", (dir / "campaign.json").string(), "--out", (dir / "out").string()};
@@ -228,7 +207,7 @@ ProcessResult run_demcal(const std::vector<std::string>& args, const std::string
 TEST_P(Limits, InputOverALimitIsRefusedAtOnceNamingTheOptionValueAndLimit) {
   const Entry& entry = GetParam();
   const auto dir = test_support::fresh_dir("limits", entry.id);
-  write_text(dir / "measured.csv", measured_text(20));
+  write_text(dir / "measured.csv", toy_measured_text());
   const ProcessResult r = run_demcal(entry.setup(dir), entry.environment, dir);
   const std::string message = read_text(dir / "stderr.txt");
   RecordProperty("message", message);

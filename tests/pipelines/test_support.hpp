@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <ostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,36 @@ inline fs::path fresh_dir(const std::string& suite, const std::string& name) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir;
+}
+
+inline std::string read_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+inline void write_text(const fs::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
+
+// A measured curve in the layout of the toy simulator (top_horizontal in m, force in N), rows + 1 rows.
+inline std::string toy_measured_text(int rows = 20) {
+  std::string text = "top_horizontal,force\n";
+  for (int i = 0; i <= rows; ++i) text += std::to_string(0.0005 * i) + "," + std::to_string(6000.0 * i / (i + 2.0)) + "\n";
+  return text;
+}
+
+// A valid, tiny campaign through the toy simulator, k and friction free, measured.csv in `dir`.
+inline nlohmann::json toy_campaign(const fs::path& dir, const std::string& name) {
+  return {{"name", name},
+          {"measured", (dir / "measured.csv").string()},
+          {"parameters", {{{"name", "k"}, {"lower", 1e6}, {"upper", 1e8}, {"scale", "log"}},
+                          {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
+          {"objective", 1},
+          {"optimiser", {{"algorithm", "pso"}, {"population", 2}, {"iterations", 1}, {"seed", 1}}},
+          {"backend", {{"type", "command"},
+                       {"command", python() + " " + kToySimulator + " {k} {friction_deg} {output}"},
+                       {"parallel", 1}}},
+          {"report", false}};
 }
 
 inline nlohmann::json read_json(const fs::path& path) {
