@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The goal study of `demcal diagnose` (docs/diagnose.md): for every hidden effect and a control
+"""The goal study of `demcal diagnose` (docs/journal/diagnose-studies.md): for every hidden effect and a control
 with none, measurements made by the engine with parameters the diagnosis is not told plus force
 noise, one diagnosis per noise seed; then the table of how often the right effect was named, how
 well its parameters came back (within 25 %, and inside the bounds the diagnosis states), how far
@@ -93,7 +93,7 @@ def campaign(measured, args):
         "parameters": [{"name": "kn", "lower": 1e8, "upper": args.kn_upper, "scale": "log10"},
                        {"name": "ks", "lower": 1e8, "upper": 1e10, "scale": "log10"},
                        {"name": "friction_deg", "lower": 25, "upper": 45}],
-        # by default the abutment gauge is not fitted (docs/diagnose.md): it is the check on data not
+        # by default the abutment gauge is not fitted (docs/journal/diagnose-studies.md): it is the check on data not
         # fitted; --fit-abutment fits it too
         "objective": {"type": 1, "weights": {} if args.fit_abutment else {"abutment_horizontal": 0},
                       "window": args.window},

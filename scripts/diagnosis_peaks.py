@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Peaks of a diagnosis's fits (docs/diagnose.md): for the base model and every tried candidate of a
+"""Peaks of a diagnosis's fits (docs/journal/diagnose-studies.md): for the base model and every tried candidate of a
 finished `demcal diagnose`, simulate the named cases of its campaign (fitted or held out) with the
 fitted parameters (`demcal predict`, the candidate's extended scenes) and tabulate the RMS error,
 the peak force and the displacement at the peak against the measurement's.

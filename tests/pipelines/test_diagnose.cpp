@@ -421,7 +421,7 @@ TEST(Residual, AGaugeThatOnlyMovedBackwardsIsHeldAtItsStart) {
   EXPECT_THROW(resimulated(fit, smoothing::XYSeries{}), smoothing::CurveError);
 }
 
-// The friction-softening measurement of docs/diagnose.md ("The measured window"), seed 1: cohesion
+// The friction-softening measurement of docs/journal/diagnose-studies.md ("The measured window"), seed 1: cohesion
 // passes the criterion with 565 N, friction softening falls short of it (its residual still smooth)
 // with 429 N: the criterion alone would name the worse fit, so neither is chosen.
 TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
@@ -455,7 +455,7 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
   EXPECT_EQ(d.candidates[0].verdict, "rejected");
   EXPECT_EQ(d.error_after, 565);
   // One passes just beyond the threshold and two others fall short of it by less than the tie margin,
-  // all three lowering the error alike (the friction-softening measurement of docs/diagnose.md, "A
+  // all three lowering the error alike (the friction-softening measurement of docs/journal/diagnose-studies.md, "A
   // gauge that moves backwards, scored", seed 1): the criterion prefers none clearly, so none is chosen.
   d.error_before = 954;
   d.candidates = {candidate("cohesion", 374, -8.9), candidate("crushing-cap", 357, -10.1),
@@ -522,7 +522,7 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
 }
 
 // Which searches go on after the selection (step 5b), on the joint-closure measurements of
-// docs/diagnose.md ("Contenders searched further"): seed 5 ("no effect found", joint closure's
+// docs/journal/diagnose-studies.md ("Contenders searched further"): seed 5 ("no effect found", joint closure's
 // criterion -24.5 with its error risen 189 -> 222 N) and seed 1 (three effects tied at 170-211 N,
 // joint closure -56 with its error risen 316 -> 360 N).
 TEST(Evidence, AnUnexplainedResidualSearchesItsContendersFurther) {
@@ -555,7 +555,7 @@ TEST(Evidence, AnUnexplainedResidualSearchesItsContendersFurther) {
   EXPECT_EQ(candidates_to_search_further(d, options), (std::vector<std::string>{"support-compliance", "joint-closure"}));
 
   // accepted above the floor: that effect's own search first; still above it after that search,
-  // the rivals whose criterion passes (a joint gap imitated by a compliant support, docs/diagnose.md)
+  // the rivals whose criterion passes (a joint gap imitated by a compliant support, docs/journal/diagnose-studies.md)
   d.candidates = {tried_candidate("joint-closure", 175, -40), tried_candidate("cohesion", 300, -12),
                   tried_candidate("crushing-cap", 290, -4)};
   select_effect(d, options);
@@ -588,7 +588,7 @@ TEST(Evidence, AnUnexplainedResidualSearchesItsContendersFurther) {
   ASSERT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
   EXPECT_TRUE(candidates_to_search_further(d, options).empty());
   // ... but a tie there is undecided, and both are searched on (a compliant support and a joint
-  // gap within the criterion's tie margin, the support's seed 4 in docs/diagnose.md)
+  // gap within the criterion's tie margin, the support's seed 4 in docs/journal/diagnose-studies.md)
   d.error_before = 105;  // within twice the floor
   d.candidates = {tried_candidate("support-compliance", 96.0, -25.9), tried_candidate("joint-gap", 94.8, -21.5),
                   tried_candidate("crushing-cap", 105.9, -4.6)};
@@ -597,7 +597,7 @@ TEST(Evidence, AnUnexplainedResidualSearchesItsContendersFurther) {
   EXPECT_EQ(candidates_to_search_further(d, options), (std::vector<std::string>{"support-compliance", "joint-gap"}));
 }
 
-// The verdicts that leave the question open advise twice the search per candidate (docs/diagnose.md,
+// The verdicts that leave the question open advise twice the search per candidate (docs/journal/diagnose-studies.md,
 // "The budget"): no effect found, a tie, a chosen fit above the explained level; the settled ones
 // do not.
 TEST(Evidence, AnOpenVerdictAdvisesALongerSearch) {
@@ -640,7 +640,7 @@ TEST(Evidence, AnOpenVerdictAdvisesALongerSearch) {
   EXPECT_EQ(advised(), 0);
 }
 
-// The joint-closure measurement of docs/diagnose.md ("The goal study on the current build"), seed 2:
+// The joint-closure measurement of docs/journal/diagnose-studies.md ("The goal study on the current build"), seed 2:
 // the base fit, its kn at the upper bound, misses the curves by 3 x the noise, and its re-runs
 // (177, 197, 333 N) scatter by 2.8 x the noise. Counted in full, that scatter excused the base
 // ("no effect needed"); counted up to the noise, the misfit stands and no tried effect explains it.
@@ -680,7 +680,7 @@ TEST(Evidence, AScatterAboveTheNoiseDoesNotExcuseTheBase) {
 }
 
 // Where the base response splits, step 4 does not prune by signature: on the goal study's
-// joint-closure seed 2 (docs/diagnose.md) joint closure ranked fifth of seven (12 %) and was left
+// joint-closure seed 2 (docs/journal/diagnose-studies.md) joint closure ranked fifth of seven (12 %) and was left
 // untried, while its calibration alone fits the measurement to the noise (235 -> 62 N).
 TEST(Evidence, ASplitBaseCalibratesEveryEffect) {
   DiagnoseOptions options;
@@ -906,7 +906,7 @@ namespace {
 // (5 points per joint) at 1 mm/s to 8 mm, measured with parameters the diagnosis is not told (set
 // on the default scene, as a calibration sets them), 1.5 % of the peak force as noise on the force,
 // calibrated with objective 1 on both gauges, each over its measured range (the measured window). (At 5 mm/s the curve's own scatter, 140-190 N, hides
-// every effect but a lucky one from the search: docs/diagnose.md.)
+// every effect but a lucky one from the search: docs/journal/diagnose-studies.md.)
 dem::ArchOptions loop_arch() {
   dem::ArchOptions o;
   o.contacts_per_joint = 5;
@@ -1027,7 +1027,7 @@ TEST(DiagnoseLoop, ControlNeedsNoEffect) {
   EXPECT_EQ(d.advised_candidate_simulations, 0);  // a settled verdict advises no longer search
 }
 
-// The reduced goal test (docs/diagnose.md): horizontal springs of 5 MN/m under the right abutment,
+// The reduced goal test (docs/journal/diagnose-studies.md): horizontal springs of 5 MN/m under the right abutment,
 // which the diagnosis is not told (named in 5 of 5 noise seeds of the goal study). Both effects are
 // probed and ranked, calibrated through the campaign machinery (into the diagnosis's archive),
 // re-simulated on the base grid, judged and reported; the compliant support is named at the right

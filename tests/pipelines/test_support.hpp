@@ -24,7 +24,7 @@ inline std::string python() { return fs::exists("/usr/bin/python3") ? "/usr/bin/
 
 // One realisation of the engine's round-off: the automatic time step's face rule and its safety
 // factor moved by k x 1e-14, the same physics. The CI runs the default; instances named
-// DISABLED_RoundOff count how a test on a chaotic curve fares over others (docs/diagnose.md),
+// DISABLED_RoundOff count how a test on a chaotic curve fares over others (docs/journal/diagnose-studies.md),
 // run with --gtest_also_run_disabled_tests.
 struct Realisation {
   std::string faces = dem::SolverSettings{}.time_step_faces;

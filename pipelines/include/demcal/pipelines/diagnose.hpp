@@ -29,7 +29,7 @@
 //                    parameters (ParameterBound: the fit re-run with that parameter moved, the
 //                    others re-fitted where needed).
 //
-// Outputs: <out>/diagnosis.json (layout in docs/diagnose.md) and <out>/report.md with residual
+// Outputs: <out>/diagnosis.json (layout in docs/commands/diagnose.md) and <out>/report.md with residual
 // plots before and after, the table of candidates and the verdict in words. Forces in N,
 // displacements in m, friction in degrees (as in campaigns).
 #pragma once
@@ -227,7 +227,7 @@ struct DiagnoseOptions {
   // scatter by more than scatter_floor_ratio x the noise, response_splits). There a signature is the
   // difference of single runs, each one realisation of the split, and ranks effects by realisation
   // as much as by shape (measured: joint closure ranked fifth of seven, 12 %, on a measurement its
-  // own calibration then fitted to the noise; docs/diagnose.md). 0 (the default): every effect;
+  // own calibration then fitted to the noise; docs/journal/diagnose-studies.md). 0 (the default): every effect;
   // otherwise >= 1, and at least max_candidates.
   int candidates_at_split = 0;
   int candidate_evaluations = 0;          // simulations per candidate calibration; 0 = the campaign's
@@ -235,13 +235,13 @@ struct DiagnoseOptions {
   // is calibrated at its best-signature target and also at every other target whose signature
   // explains at least this share of the best one's; the better fit (lower error) is kept. Measured:
   // a gap's signature at the joint under the load and at the other hinge can differ by 1 %
-  // (docs/diagnose.md, "A joint gap at two close targets"). In (0, 1]; 1 = the best target only
+  // (docs/journal/diagnose-studies.md, "A joint gap at two close targets"). In (0, 1]; 1 = the best target only
   // unless another matches it exactly.
   double close_target_share = 0.9;
   // The same for the effects: one ranked below the max_candidates (or candidates_at_split) tried is
   // calibrated too when its signature explains at least this share of the last tried one's, within
   // the budget. Measured: the crushing cap ranked fourth at 24.5 % behind friction softening's 26.8 %
-  // on a measurement it explains (docs/diagnose.md, "Close effects at the cut"). In (0, 1]; 1 =
+  // on a measurement it explains (docs/journal/diagnose-studies.md, "Close effects at the cut"). In (0, 1]; 1 =
   // only an exact tie.
   double close_candidate_share = 0.9;
   double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
@@ -268,7 +268,7 @@ struct DiagnoseOptions {
   double narrow_log_factor = 0;
   double narrow_linear_share = 0;
   // Optimiser of each candidate calibration (and of the base refinement). "bo" (the default):
-  // Bayesian optimisation on the surrogate, which measured best on friction softening (docs/diagnose.md);
+  // Bayesian optimisation on the surrogate, which measured best on friction softening (docs/journal/diagnose-studies.md);
   // an NLopt local algorithm ("nlopt:LN_SBPLX") starts from the base best with the effect at the
   // probe closest to the measurement (a warm start; its first step `candidate_initial_step` in
   // unit-cube lengths, in (0, 0.5]); a swarm ("tbpso", "pso", "ga") searches the box with the
@@ -278,7 +278,7 @@ struct DiagnoseOptions {
   // The surrogate kind of the refinement's and the candidates' searches ("gp" | "mlp"), whatever the
   // campaign's. "mlp" models the curves, so its searches find the narrow valley a change of
   // mechanism makes in the objective, which "gp", a model of the scalar fitness, misses
-  // (docs/diagnose.md, "At 1 mm/s").
+  // (docs/journal/diagnose-studies.md, "At 1 mm/s").
   std::string surrogate_kind = "mlp";
   // Data the fits do not use, to check them: the campaign's cases named here are left out of every
   // calibration of the diagnosis (at least one case must stay), and channels of weight 0 are not
@@ -305,7 +305,7 @@ struct DiagnoseOptions {
   // trains on every archived run of the first (ContinuedSearch). Its fit replaces the first when
   // closer to the measurement on the median of its re-runs, and the selection is made again with
   // it. An effect's truth can be a narrow valley that one search budget reaches in some noise seeds
-  // only (measured on the arch's beam restraint and joint closure, docs/diagnose.md). -1 (the
+  // only (measured on the arch's beam restraint and joint closure, docs/journal/diagnose-studies.md). -1 (the
   // default): a candidate's budget; 0: none; within max_simulations (contenders searched all or
   // none, so that none gets more search than another).
   long continued_evaluations = -1;
@@ -462,7 +462,7 @@ std::string base_at_bound_note(const Diagnosis& diagnosis, const optimise::Param
 // densely than the measurement (more than `kDenserRecord` x its rows), has at least `kShapeInGap`
 // simulated envelope points: a fast event (a slip, a snap) recorded densely by the simulation and at
 // two points by the measurement, so that the simulated curve is compared with a straight line there
-// and keeps an error no parameter removes (docs/diagnose.md, "Sampled alike"). It names those fits
+// and keeps an error no parameter removes (docs/journal/diagnose-studies.md, "Sampled alike"). It names those fits
 // and recommends recording the simulation at the measurement's rate. "" when there are none.
 constexpr double kSparseGap = 0.25;
 constexpr int kShapeInGap = 3;
@@ -493,7 +493,7 @@ void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 //   evidence_threshold without spoiling held-out data (rejected because their error did not
 //   fall, or as clearly less good than an accepted fit that itself stayed above the level after
 //   its own further search). Each gets the same further budget, so that no effect wins by search
-//   effort: the truth of an effect can be a valley its first search missed (docs/diagnose.md,
+//   effort: the truth of an effect can be a valley its first search missed (docs/journal/diagnose-studies.md,
 //   "Contenders searched further").
 // A candidate already searched further (continued.simulations > 0) is not named again.
 std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis, const DiagnoseOptions& options);
@@ -502,7 +502,7 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis
 // the curves by more than the level at which the loop calls a fit explained (noise_level_ratio x
 // error_floor): the effect explains part of the residual, not all of it, and the closest other fit
 // is named with its error and criterion (measured: a wedge-shaped joint gap imitated by a
-// compliant support whose fit stays above that level, docs/diagnose.md). "" otherwise.
+// compliant support whose fit stays above that level, docs/journal/diagnose-studies.md). "" otherwise.
 std::string unexplained_fit_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // The simulations per candidate a further diagnosis should get when this one leaves the question
@@ -510,7 +510,7 @@ std::string unexplained_fit_note(const Diagnosis& diagnosis, const DiagnoseOptio
 // candidate is accepted; a tie; or a chosen fit above the explained level): twice `per_candidate`.
 // In the goal study such searches reached valleys that shorter ones missed (a crushing cap
 // unfound, a joint closure tied with a compliant support, a joint gap imitated by one;
-// docs/diagnose.md, "The budget"). 0 when the verdict is settled.
+// docs/journal/diagnose-studies.md, "The budget"). 0 when the verdict is settled.
 long advised_candidate_simulations(const Diagnosis& diagnosis, const DiagnoseOptions& options, long per_candidate);
 
 // The verdict's sentence advising that further diagnosis ("" when `advised` is 0).
