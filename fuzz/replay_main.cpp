@@ -5,16 +5,19 @@
 //
 //   fuzz_replay_csv fuzz/corpus/csv [more files or folders]
 //
-// A target aborts on a broken property and lets unexpected exceptions escape. An exception is
-// reported with the input's path and the replay goes on; an abort (or a sanitizer report, which
-// ends the process) is reported with the input's path from a signal handler or the sanitizer's
-// death callback. Exit status 0 only when every input passed and at least one input was read.
+// A target aborts on a broken property and lets unexpected exceptions escape; a sanitizer report
+// ends the process. So each input runs in a child process of its own (fork): an exception, an
+// abort, a signal, a sanitizer report or a leak fails that input, which is named on stderr, and the
+// replay goes on with the next. Exit status 0 only when every input passed and at least one input
+// was read.
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
-#include <csignal>
+#include <cerrno>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <exception>
 #include <filesystem>
@@ -26,27 +29,41 @@
 namespace fs = std::filesystem;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size);
-// In a sanitized build (ASan/UBSan runtime linked) this names the input before the report ends the
-// process; elsewhere the weak symbol is null.
-extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
 
 namespace {
 
-// The input being replayed, for the abort handler and the death callback (async-signal-safe write).
-char current_input[4096] = "";
-
-void name_current_input() {
-  const char* prefix = "fuzz replay: FAILED on input ";
-  const char* suffix = ": the process ends (a property check aborted, or the sanitizer report above)\n";
-  (void)!write(STDERR_FILENO, prefix, std::strlen(prefix));
-  (void)!write(STDERR_FILENO, current_input, std::strlen(current_input));
-  (void)!write(STDERR_FILENO, suffix, std::strlen(suffix));
+// The child's side: one call of the target; exit status 0, or 1 after an unexpected exception
+// (std::exit, not _exit: LeakSanitizer checks at exit).
+[[noreturn]] void run_one(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  try {
+    LLVMFuzzerTestOneInput(bytes.data(), bytes.size());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "fuzz replay: unexpected exception: %s\n", e.what());
+    std::exit(1);
+  } catch (...) {
+    std::fprintf(stderr, "fuzz replay: unexpected exception of unknown type\n");
+    std::exit(1);
+  }
+  std::exit(0);
 }
 
-extern "C" void on_abort(int signal) {
-  name_current_input();
-  std::signal(signal, SIG_DFL);
-  std::raise(signal);
+// The parent's side: "" when the child passed, else how it ended.
+std::string replay(const fs::path& path) {
+  std::fflush(nullptr);
+  const pid_t child = fork();
+  if (child < 0) return std::string("fork failed: ") + std::strerror(errno);
+  if (child == 0) run_one(path);
+  int status = 0;
+  while (waitpid(child, &status, 0) < 0)
+    if (errno != EINTR) return std::string("waitpid failed: ") + std::strerror(errno);
+  if (WIFSIGNALED(status))
+    return std::string("killed by signal ") + strsignal(WTERMSIG(status)) +
+           " (a property check's abort, or a sanitizer report above)";
+  if (WEXITSTATUS(status) != 0)
+    return "exit status " + std::to_string(WEXITSTATUS(status)) + " (an exception, or a sanitizer report above)";
+  return "";
 }
 
 std::vector<fs::path> inputs_of(const std::vector<std::string>& args) {
@@ -78,22 +95,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "fuzz replay: no input to replay\n");
     return 2;
   }
-  std::signal(SIGABRT, on_abort);
-  if (__sanitizer_set_death_callback) __sanitizer_set_death_callback(name_current_input);
   int failures = 0;
   for (const auto& path : inputs) {
-    std::snprintf(current_input, sizeof current_input, "%s", path.c_str());
-    std::ifstream in(path, std::ios::binary);
-    const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    try {
-      LLVMFuzzerTestOneInput(bytes.data(), bytes.size());
-    } catch (const std::exception& e) {
-      ++failures;
-      std::fprintf(stderr, "fuzz replay: FAILED on input %s: unexpected exception: %s\n", path.c_str(), e.what());
-    } catch (...) {
-      ++failures;
-      std::fprintf(stderr, "fuzz replay: FAILED on input %s: unexpected exception of unknown type\n", path.c_str());
-    }
+    const std::string failure = replay(path);
+    if (failure.empty()) continue;
+    ++failures;
+    std::fprintf(stderr, "fuzz replay: FAILED on input %s: %s\n", path.c_str(), failure.c_str());
   }
   std::printf("fuzz replay: %zu inputs, %d failed\n", inputs.size(), failures);
   return failures == 0 ? 0 : 1;
