@@ -52,8 +52,9 @@ bench: build
 	bash scripts/bench.sh $(BUILD)
 
 # Crash safety: 20 kills -9 of a campaign, each resumed; result and archive checked (docs/pipelines.md).
+# `make test` runs a short one (5 kills, surrogate on).
 soak: build
-	$(BUILD)/bench/bench_soak --kills 20 --seed 1 --out $(BUILD)/soak
+	$(BUILD)/tests/crash_soak --kills 20 --seed 1 --out $(BUILD)/soak
 
 clean:
 	rm -rf $(BUILD)

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets with clang (ASan + UBSan) and runs each for MINUTES minutes on the
 # seed corpus of fuzz/corpus/<target>/ (read-only: new inputs go to BUILD_DIR/corpus/<target>/).
-# A crash leaves BUILD_DIR/crashes/<target>/crash-* and stops with a non-zero status; turn it into
-# a regression test in tests/ and fix the bug. Not part of `make test`.
+# A crash leaves BUILD_DIR/crashes/<target>/crash-* and stops with a non-zero status: copy it to
+# fuzz/corpus/<target>/regression-<what-it-breaks> (printed below), where `make test` replays it
+# (ctest FuzzReplay.<target>), and fix the bug. The fuzzing itself is not part of `make test`.
 #   scripts/fuzz.sh [BUILD_DIR=build-fuzz] [MINUTES=10] [TARGETS="csv scene campaign"]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,6 +24,10 @@ for t in $targets; do
       "$build/corpus/$t" "fuzz/corpus/$t" 2>"$build/fuzz_$t.log"; then
     status=1
     echo "fuzz: $t FOUND A CRASH: $(ls "$build/crashes/$t")" >&2
+    echo "fuzz: keep each in the corpus that make test replays (FuzzReplay.$t), named for what it breaks:" >&2
+    for crash in "$build/crashes/$t"/*; do
+      echo "fuzz:   cp $crash fuzz/corpus/$t/regression-<name>" >&2
+    done
   fi
   runs=$(awk '/stat::number_of_executed_units/ {print $2}' "$build/fuzz_$t.log")
   echo "fuzz: $t: $((($(date +%s) - start))) s, ${runs:-?} executions, corpus $(ls "$build/corpus/$t" | wc -l) inputs"

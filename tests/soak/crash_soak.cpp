@@ -1,20 +1,24 @@
 // Crash-safety soak: kills a calibration campaign with SIGKILL at seeded random moments, some of
 // them inside an archive write, resumes it each time, and checks that the final result equals an
-// uninterrupted run and that the archive passes PRAGMA integrity_check. A benchmark-style command
-// (minutes), not part of the test suite:
+// uninterrupted run and that the archive passes PRAGMA integrity_check.
 //
-//   build/bench/bench_soak [--kills 20] [--seed 1] [--out build/soak] [--demcal build/demcal]
+//   build/tests/crash_soak [--kills 20] [--seed 1] [--surrogate] [--out build/soak] [--demcal build/demcal]
+//
+// `make soak` runs 20 kills (seconds; minutes with --surrogate); the ctest
+// Soak.FiveKillsWithTheSurrogateResumeToTheSameResult runs 5 with --surrogate in `make test`.
 //
 // The campaign: the reference arch (3 contact points per joint, 4 mm of loading), kn and friction
-// free, objective 2, TBPSO 6 x 8, threads backend. Every demcal process runs with
-// DEMCAL_ARCHIVE_WRITE_PAUSE_MS set, so each archive write announces itself on stderr.
-// Odd-numbered kills (1st, 3rd, ...) set it to 40: every write holds its transaction open 40 ms
-// before COMMIT; the kill waits for a random 1st..12th write of the attempt to begin and lands
-// inside it (confirmed afterwards: the attempt's last stderr line is that write's "begins").
-// Even-numbered kills set it to 0 (no pause) and land after a random delay between 0.1 s and the
-// uninterrupted run's wall time, wherever the campaign is. When an attempt finishes before its kill, its result is checked
-// and the next kill starts a fresh campaign folder (a new cycle). Exit status 0 when every check
-// passed.
+// free, objective 2, TBPSO 6 x 8, threads backend. --surrogate turns on pre-screening
+// (docs/surrogate.md): from the 8th finished run on, each iteration ranks a pool of 4 x 6
+// candidates with the surrogate model refitted to the archive and simulates the best 3.
+// Every demcal process runs with DEMCAL_ARCHIVE_WRITE_PAUSE_MS set, so each archive write
+// announces itself on stderr. Odd-numbered kills (1st, 3rd, ...) set it to 40: every write holds
+// its transaction open 40 ms before COMMIT; the kill waits for a random 1st..12th write of the
+// attempt to begin and lands inside it (confirmed afterwards: the attempt's last stderr line is
+// that write's "begins"). Even-numbered kills set it to 0 (no pause) and land after a random delay
+// between 0.1 s and the uninterrupted run's wall time, wherever the campaign is. When an attempt
+// finishes before its kill, its result is checked and the next kill starts a fresh campaign
+// folder (a new cycle). Exit status 0 when every check passed.
 #include "demcal/pipelines/archive.hpp"
 #include "demcal/pipelines/process.hpp"
 
@@ -79,26 +83,36 @@ int main(int argc, char** argv) {
   int kills = 20;
   unsigned seed = 1;
   fs::path out = "build/soak";
-  fs::path demcal = fs::canonical("/proc/self/exe").parent_path().parent_path() / "demcal";
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string flag = argv[i], value = argv[i + 1];
+  bool surrogate = false;
+  fs::path demcal = DEMCAL_BINARY;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "--surrogate") {
+      surrogate = true;
+      continue;
+    }
+    if (i + 1 >= argc) {
+      std::cerr << "crash_soak: " << flag << " needs a value\n";
+      return 1;
+    }
+    const std::string value = argv[++i];
     if (flag == "--kills") kills = std::stoi(value);
     else if (flag == "--seed") seed = static_cast<unsigned>(std::stoul(value));
     else if (flag == "--out") out = value;
     else if (flag == "--demcal") demcal = value;
     else {
-      std::cerr << "bench_soak: unknown flag " << flag << "\n";
+      std::cerr << "crash_soak: unknown flag " << flag << "\n";
       return 1;
     }
   }
   if (!fs::exists(demcal)) {
-    std::cerr << "bench_soak: no demcal program at " << demcal << " (use --demcal)\n";
+    std::cerr << "crash_soak: no demcal program at " << demcal << " (use --demcal)\n";
     return 1;
   }
   fs::remove_all(out);
   fs::create_directories(out);
   out = fs::absolute(out);
-  const json campaign = {
+  json campaign = {
       {"name", "soak"},
       {"scene", {{"generator", "arch"},
                  {"options", {{"contacts_per_joint", 3}, {"velocity", 0.05}, {"max_displacement", 0.004}}}}},
@@ -113,6 +127,7 @@ int main(int argc, char** argv) {
       {"optimiser", {{"algorithm", "tbpso"}, {"population", 6}, {"iterations", 8}, {"seed", 1}}},
       {"backend", {{"type", "threads"}, {"threads", 2}}},
       {"report", false}};
+  if (surrogate) campaign["surrogate"] = {{"min_runs", 8}, {"pool_factor", 4}, {"k", 3}};
   std::ofstream(out / "campaign.json") << campaign.dump(2);
 
   // pause_ms: DEMCAL_ARCHIVE_WRITE_PAUSE_MS of the demcal process (writes announced on stderr).
@@ -130,7 +145,7 @@ int main(int argc, char** argv) {
   const auto t0 = std::chrono::steady_clock::now();
   const ProcessResult reference = run(out / "uninterrupted", false, nullptr, (out / "uninterrupted.stderr").string(), 0);
   if (!reference.ok()) {
-    std::cerr << "bench_soak: the uninterrupted campaign failed: " << reference.message << "\n";
+    std::cerr << "crash_soak: the uninterrupted campaign failed: " << reference.message << "\n";
     return 1;
   }
   const json expected = comparable(out / "uninterrupted" / "result.json");
@@ -147,13 +162,17 @@ int main(int argc, char** argv) {
     ++checks;
     RunArchive archive((dir / "archive.sqlite").string());
     const std::string integrity = archive.integrity_check();
-    const bool same = comparable(dir / "result.json") == expected;
+    const json got = comparable(dir / "result.json");
+    const bool same = got == expected;
     const bool runs = archive.run_count() == expected_runs;
     if (integrity != "ok" || !same || !runs) {
       ++failures;
       std::printf("FAILED %s: integrity %s, result %s, runs %lld of %lld\n", when.c_str(), integrity.c_str(),
                   same ? "equal" : "DIFFERENT", static_cast<long long>(archive.run_count()),
                   static_cast<long long>(expected_runs));
+      if (!same)
+        for (const auto& change : json::diff(expected, got))
+          std::printf("  differs from the uninterrupted result at %s\n", change.at("path").get<std::string>().c_str());
     }
   };
   while (done_kills < kills) {
@@ -185,13 +204,20 @@ int main(int argc, char** argv) {
       const auto [last, finished] = last_write(read_text(log));
       const bool inside = last > 0 && !finished;
       in_write += inside;
-      std::printf("kill %2d (cycle %d, %s): after %.2f s%s\n", done_kills, cycle,
-                  aim_at_write ? ("at write " + std::to_string(target)).c_str() : "at a random time", r.wall_time_s,
-                  inside ? ", inside an archive write" : "");
       // The archive a kill -9 leaves is consistent before any resume touches it (a kill before
-      // demcal created it leaves none).
+      // demcal created it leaves none). Its run count says how far the campaign had got (with
+      // --surrogate, screening starts at 8 runs).
       const fs::path archive = dir / "archive.sqlite";
-      const std::string integrity = fs::exists(archive) ? RunArchive(archive.string()).integrity_check() : "ok";
+      std::string integrity = "ok";
+      long long runs = 0;
+      if (fs::exists(archive)) {
+        RunArchive opened(archive.string());
+        integrity = opened.integrity_check();
+        runs = opened.run_count();
+      }
+      std::printf("kill %2d (cycle %d, %s): after %.2f s, %lld runs archived%s\n", done_kills, cycle,
+                  aim_at_write ? ("at write " + std::to_string(target)).c_str() : "at a random time", r.wall_time_s,
+                  runs, inside ? ", inside an archive write" : "");
       if (integrity != "ok") {
         ++failures;
         std::printf("FAILED: integrity after kill %d: %s\n", done_kills, integrity.c_str());
