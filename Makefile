@@ -7,7 +7,7 @@ BUILD ?= build
 JOBS ?= 2
 BUILD_TYPE ?= Release
 
-.PHONY: all deps configure build demo test test-sanitize fuzz bench soak clean
+.PHONY: all deps configure build demo test test-sanitize test-sanitize-reduced fuzz bench soak clean
 
 all: build
 
@@ -36,11 +36,19 @@ SANITIZE_BUILD ?= build-sanitize
 SANITIZE_TARGETS ?= all
 SANITIZE_TESTS ?= .
 SANITIZE_EXCLUDE ?= _NOT_BUILT
+# SANITIZE_EXCLUDE_FILE: a file of further ctest -E patterns, one a line (# comments).
+SANITIZE_EXCLUDE_FILE ?=
+sanitize_exclude_listed = $(if $(SANITIZE_EXCLUDE_FILE),|$(shell grep -v -e '^\#' -e '^$$' $(SANITIZE_EXCLUDE_FILE) | paste -sd'|'))
 test-sanitize: deps
 	cmake -S . -B $(SANITIZE_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDEMCAL_SANITIZE=ON -DDEMCAL_BUILD_BENCHMARKS=OFF
 	cmake --build $(SANITIZE_BUILD) -j$(JOBS) --target $(SANITIZE_TARGETS)
 	cd $(SANITIZE_BUILD) && ASAN_OPTIONS=abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
-	  ctest --output-on-failure -j$(JOBS) --timeout 3600 -R '$(SANITIZE_TESTS)' -E '_NOT_BUILT|$(SANITIZE_EXCLUDE)'
+	  ctest --output-on-failure -j$(JOBS) --timeout 3600 -R '$(SANITIZE_TESTS)' -E '_NOT_BUILT|$(SANITIZE_EXCLUDE)$(sanitize_exclude_listed)'
+
+# Every test program sanitized, less the long loop tests of tests/sanitize/long-tests.txt (their
+# reduced forms run; docs/hardening.md).
+test-sanitize-reduced:
+	$(MAKE) test-sanitize SANITIZE_EXCLUDE_FILE=tests/sanitize/long-tests.txt
 
 # libFuzzer: clang build of the three fuzz targets, each run FUZZ_MINUTES (scripts/fuzz.sh).
 FUZZ_BUILD ?= build-fuzz
