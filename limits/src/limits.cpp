@@ -140,7 +140,7 @@ void set_from_text(std::string_view key_equals_value, bool export_to_environment
 }
 
 void reset() {
-  ensure_loaded();
+  std::call_once(g_loaded, [] {});  // so that a later first use does not load over this
   load_environment();
 }
 
