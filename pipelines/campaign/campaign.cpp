@@ -19,6 +19,7 @@
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <numeric>
 #include <optional>
 #include <set>
 
@@ -87,6 +88,15 @@ struct SurrogateSetup {
   std::vector<ArchivedCase> archived_cases;
   std::optional<surrogate::SurrogateModel> trained_model;
   surrogate::CurveHooks hooks;  // the "mlp" kind: the fitness of predicted curves, a told point's curves
+  surrogate::SurrogateOptions options;  // the campaign's, with the batch and training threads resolved
+  // This session's evaluation rounds: wall seconds and simulated runs (the cost of a simulation as
+  // the user waits for it, fitness included), and the runs' own seconds summed.
+  struct Clock {
+    double round_s = 0;
+    long runs = 0;
+    double run_s = 0;
+  };
+  std::shared_ptr<Clock> clock = std::make_shared<Clock>();
 };
 
 SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCases& prepared,
@@ -95,6 +105,9 @@ SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCas
   SurrogateSetup s;
   s.bayes = config.optimiser.algorithm == "bo";
   s.screening = config.surrogate.enabled && !s.bayes;
+  s.options = config.surrogate.options;
+  if (s.options.batch == 0) s.options.batch = std::max(1, backend.workers());
+  s.options.threads = std::max(1, hardware_threads());
   s.horizon = previous && previous->config.contains("surrogate_run_horizon")
                   ? previous->config.at("surrogate_run_horizon").get<std::int64_t>()
                   : archive.max_run_id();
@@ -105,6 +118,10 @@ SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCas
     if (curves) grids.push_back(grid = case_curve_grid(config, prepared, k));
     s.archived_cases.push_back({backend.model_hash(k), prepared.objective_keys[k], config.cases[k].weight, grid});
   }
+  // A simulation's wall time per worker in this session, fitness included (cost-aware batches of "bo").
+  s.hooks.seconds_per_simulation = [clock = s.clock, workers = std::max(1, backend.workers())] {
+    return clock->runs > 0 ? clock->round_s / static_cast<double>(clock->runs) * workers : 0.0;
+  };
   if (curves) {
     s.hooks.fitness = [grids](const Eigen::VectorXd& outputs) { return curve_fitness(outputs, grids); };
     // A told point's runs, found by the parameters the campaign simulated for it.
@@ -171,7 +188,7 @@ class CampaignOptimisers {
       optimise::OptimiserOptions o = config.optimiser;
       if (setup.bayes) {
         main_ = surrogate::make_bayes_optimiser(
-            config.space, o, config.surrogate.options,
+            config.space, o, setup.options,
             archive_training_rows(archive, config.space, setup.archived_cases, setup.horizon), setup.hooks);
       } else {
         if (setup.screening && config.surrogate.options.k > 0)
@@ -274,7 +291,13 @@ struct CampaignContext {
 struct SessionCounts {
   long simulated = 0;
   long reused_from_archive = 0;
+  double model_s = 0;        // choosing candidates: the optimiser's ask, the surrogate's fits and search
+  double simulation_s = 0;   // waiting for the simulations and their fitness
 };
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
 
 // Progress lines: the planned totals and what is done so far.
 struct CampaignProgress {
@@ -325,7 +348,7 @@ std::optional<ProposedBatch> propose_batch(const CampaignContext& ctx, const Cam
   const auto rows = training_rows(config, ctx.surrogate, ctx.archive, ctx.campaign_id);
   long finite = 0;
   for (const auto& r : rows) finite += std::isfinite(r.fitness) ? 1 : 0;
-  surrogate::SurrogateModel model(config.surrogate.options, ctx.surrogate.hooks);
+  surrogate::SurrogateModel model(ctx.surrogate.options, ctx.surrogate.hooks);
   bool usable = false;
   if (ctx.surrogate.trained_model) {
     model = *ctx.surrogate.trained_model;
@@ -405,6 +428,7 @@ CandidateFitness evaluate_candidates(const CampaignContext& ctx, const std::vect
     run.status = outcome.status;
     run.message = outcome.message;
     run.wall_time_s = outcome.wall_time_s;
+    ctx.surrogate.clock->run_s += outcome.wall_time_s;
     run.curves = std::move(outcome.curves);
     run.details = std::move(outcome.details);
     run.id = archive.insert_run(run);
@@ -496,13 +520,24 @@ SessionCounts run_iterations(const CampaignContext& ctx, CampaignOptimisers& opt
   for (int iteration = first_iteration;; ++iteration) {
     optimise::Optimiser* asking = optimisers.active();
     if (!asking) break;
+    const auto asked = std::chrono::steady_clock::now();
     std::optional<ProposedBatch> next = propose_batch(ctx, optimisers, *asking);
+    counts.model_s += seconds_since(asked);
+    progress.state.model_s = counts.model_s;
     if (!next) break;
     ProposedBatch& proposed = *next;
     progress.state.iteration = iteration + 1;
     std::vector<std::map<std::string, double>> candidates;
     for (size_t slot : proposed.slots) candidates.push_back(config.space.values(proposed.batch[slot]));
+    const auto simulating = std::chrono::steady_clock::now();
+    const long simulated_before = counts.simulated;
     const CandidateFitness evaluated = evaluate_candidates(ctx, candidates, fitness_threads, counts, progress);
+    counts.simulation_s += seconds_since(simulating);
+    if (counts.simulated > simulated_before) {  // rounds read from the archive cost no simulation
+      ctx.surrogate.clock->round_s += seconds_since(simulating);
+      ctx.surrogate.clock->runs += counts.simulated - simulated_before;
+    }
+    progress.state.simulation_s = counts.simulation_s;
     progress.state.best = tell_and_commit(ctx, optimisers, *asking, iteration, candidates, proposed, evaluated);
     progress.state.elapsed_s = ctx.clock.elapsed_s();
     progress.printer.iteration_done(progress.state);
@@ -536,12 +571,44 @@ std::vector<ReportInputs::Failure> failed_runs(const CampaignContext& ctx, const
   return failures;
 }
 
+// "bo": how well the model predicted each proposed point before it was simulated (prequential:
+// every point held out when predicted), from the optimiser's saved state, and its batch decision.
+void bayes_statistics(const json& saved, CampaignResult& result) {
+  const json& state = saved.contains("swarm") ? saved.at("swarm") : saved;
+  const auto& predictions = state.at("told_predictions");
+  const auto& told = state.at("told_f");
+  std::vector<double> errors, ys;
+  long covered = 0;
+  long predicted = 0;
+  for (size_t i = 0; i < predictions.size() && i < told.size(); ++i) {
+    if (predictions[i].is_null()) continue;
+    ++predicted;
+    if (told[i].is_null()) continue;  // a failed run: the classifier's business, not the fitness model's
+    const double y = told[i].get<double>(), p = predictions[i].at("fitness").get<double>();
+    errors.push_back(std::abs(p - y));
+    ys.push_back(y);
+    if (y >= predictions[i].at("low90").get<double>() && y <= predictions[i].at("high90").get<double>()) ++covered;
+  }
+  result.surrogate_batch = state.at("batch").get<int>();
+  result.surrogate_batch_reason = state.at("batch_reason").get<std::string>();
+  result.surrogate_predicted = predicted;
+  if (ys.size() < 2) return;
+  const double mean = std::accumulate(ys.begin(), ys.end(), 0.0) / static_cast<double>(ys.size());
+  double spread = 0;
+  for (double y : ys) spread += std::abs(y - mean);
+  if (spread > 0) result.surrogate_prequential_error = std::accumulate(errors.begin(), errors.end(), 0.0) / spread;
+  result.surrogate_prequential_coverage90 = static_cast<double>(covered) / static_cast<double>(ys.size());
+}
+
 // The result, from the archive: a resumed campaign reports exactly what an uninterrupted one would.
 CampaignResult collect_result(const CampaignContext& ctx, const CampaignOptimisers& optimisers,
                               const std::vector<EvaluationRecord>& evaluations, const SessionCounts& counts) {
   const auto& config = ctx.config;
   CampaignResult result;
   result.simulated_this_session = counts.simulated;
+  result.model_time_s = counts.model_s;
+  result.simulation_time_s = counts.simulation_s;
+  result.run_time_s = ctx.surrogate.clock->run_s;
   result.reused_from_archive = counts.reused_from_archive;
   double best = INFINITY;
   for (const auto& e : evaluations) {
@@ -581,14 +648,21 @@ CampaignResult collect_result(const CampaignContext& ctx, const CampaignOptimise
       result.surrogate_screened_out += static_cast<long>(entry.at("candidates").size()) - entry.at("simulated").get<long>();
       result.surrogate_iterations.push_back(std::move(entry));
     }
-    if (setup.bayes) result.surrogate_simulated = result.candidates;
+    const auto statistics_start = std::chrono::steady_clock::now();
+    if (setup.bayes) {
+      result.surrogate_simulated = result.candidates;
+      if (auto last = ctx.archive.last_iteration(ctx.campaign_id)) bayes_statistics(json::parse(last->optimiser_state), result);
+    }
     const auto rows = training_rows(config, setup, ctx.archive, ctx.campaign_id);
-    if (config.surrogate.options.kind == "mlp") {
+    if (setup.bayes && config.surrogate.options.kind == "mlp") {
+      // the prequential error above is the held-out check: a 5-fold one would cost five full fits
+    } else if (config.surrogate.options.kind == "mlp") {
       const auto cv = surrogate::cross_validate(rows, config.surrogate.options, 5, setup.hooks);
       if (cv.finite_rows > 0) result.surrogate_cv_error = cv.relative_error;
     } else if (surrogate::SurrogateModel final_model(config.surrogate.options); final_model.fit(rows)) {
       result.surrogate_cv_error = final_model.gp().leave_one_out().relative_error;
     }
+    result.model_time_s += seconds_since(statistics_start);
   }
   if (!std::isfinite(best)) {
     // the reason the most runs share, with the first case it was archived for

@@ -92,6 +92,8 @@ json CampaignResult::to_json() const {
           {"optimiser_status", optimiser_status},
           {"convergence", convergence},
           {"wall_time_s", wall_time_s},
+          {"timing", {{"wall_s", wall_time_s}, {"model_s", model_time_s}, {"simulations_s", simulation_time_s},
+                      {"runs_summed_s", run_time_s}}},
           {"identifiability", identifiability.to_json()},
           {"session", {{"simulated", simulated_this_session}, {"reused_from_archive", reused_from_archive}}}};
   if (surrogate_used)
@@ -100,6 +102,12 @@ json CampaignResult::to_json() const {
                       {"simulated", surrogate_simulated},
                       {"screened_out", surrogate_screened_out},
                       {"cv_error", finite_or_null(surrogate_cv_error)}};
+  if (surrogate_used && surrogate_batch > 0)
+    j["surrogate"].update({{"batch", surrogate_batch},
+                           {"batch_reason", surrogate_batch_reason},
+                           {"predicted", surrogate_predicted},
+                           {"prequential_error", finite_or_null(surrogate_prequential_error)},
+                           {"prequential_coverage90", finite_or_null(surrogate_prequential_coverage90)}});
   if (polished)
     j["polish"] = {{"evaluations", polish_evaluations}, {"swarm_best_fitness", finite_or_null(swarm_best_fitness)},
                    {"status", polish_status}};

@@ -31,9 +31,10 @@ std::string format_progress(const ProgressState& st) {
     std::snprintf(iteration, sizeof iteration, "%d/%d", st.iteration, st.iterations);
   else
     std::snprintf(iteration, sizeof iteration, "%d", st.iteration);
-  char line[256];
-  std::snprintf(line, sizeof line, "iteration %s  simulations %ld/%ld  best %s  elapsed %s  left %s", iteration,
-                st.done, st.total, best, format_duration(st.elapsed_s).c_str(), left.c_str());
+  char line[320];
+  std::snprintf(line, sizeof line, "iteration %s  simulations %ld/%ld  best %s  elapsed %s (simulations %s, model %s)  left %s",
+                iteration, st.done, st.total, best, format_duration(st.elapsed_s).c_str(),
+                format_duration(st.simulation_s).c_str(), format_duration(st.model_s).c_str(), left.c_str());
   return line;
 }
 

@@ -79,7 +79,8 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
      << " N after. Simulations: " << d.simulations;
   if (d.simulated_this_session != d.simulations)
     md << " (" << d.simulated_this_session << " run by this session, the rest read from the archive)";
-  md << "; wall time " << num(d.wall_time_s) << " s.\n\n"
+  md << "; wall time " << num(d.wall_time_s) << " s (simulations " << num(d.simulation_time_s) << " s, model "
+     << num(d.model_time_s) << " s).\n\n"
      << "## Base fit\n\n| parameter | value |\n|---|---|\n";
   for (const auto& [k, v] : d.base_params) md << "| " << k << " | " << num(v, 4) << " |\n";
   if (!d.base_rerun_errors.empty())

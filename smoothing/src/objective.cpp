@@ -80,6 +80,32 @@ double interpolate(const XYSeries& e, double x) {
   return e.y[i - 1] + t * (e.y[i] - e.y[i - 1]);
 }
 
+namespace {
+
+// interpolate() at displacements that mostly increase: the bracketing interval is found by walking
+// forward from the last one (a search again when x goes back), with the same arithmetic, so the
+// values are interpolate()'s to the bit.
+class InterpolationSweep {
+ public:
+  explicit InterpolationSweep(const XYSeries& e) : e_(e) {
+    if (e.x.empty()) throw CurveError("interpolate: empty series");
+  }
+  double operator()(double x) {
+    if (x <= e_.x.front()) return e_.y.front();
+    if (x >= e_.x.back()) return e_.y.back();
+    if (x < e_.x[i_ - 1]) i_ = static_cast<std::size_t>(std::upper_bound(e_.x.begin(), e_.x.end(), x) - e_.x.begin());
+    while (e_.x[i_] <= x) ++i_;  // e.x[i-1] <= x < e.x[i]
+    const double t = (x - e_.x[i_ - 1]) / (e_.x[i_] - e_.x[i_ - 1]);
+    return e_.y[i_ - 1] + t * (e_.y[i_] - e_.y[i_ - 1]);
+  }
+
+ private:
+  const XYSeries& e_;
+  std::size_t i_ = 1;
+};
+
+}  // namespace
+
 std::pair<double, double> objective_window(const XYSeries& e, const XYSeries& s, ObjectiveWindow window,
                                            const std::string& label) {
   const bool common = window == ObjectiveWindow::common;
@@ -104,10 +130,12 @@ double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, in
     throw CurveError(label + ": the simulation has " + (s.x.empty() ? "no loading point" : "fewer than 2 loading points") +
                      " (finite, increasing displacement)");
   const auto [lower, upper] = objective_window(e, s, window, label);
+  // The displacements increase with k: each series is walked once instead of searched per point.
+  InterpolationSweep at_e(e), at_s(s);
   double sum = 0;
   for (int k = 0; k < points; ++k) {
     const double w = k == points - 1 ? upper : lower + (upper - lower) * k / (points - 1);
-    const double d = interpolate(e, w) - interpolate(s, w);
+    const double d = at_e(w) - at_s(w);
     sum += d * d;
   }
   return std::sqrt(sum);

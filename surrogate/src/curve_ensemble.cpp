@@ -4,6 +4,7 @@
 #include "demcal/smoothing/regression_ensemble.hpp"
 
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 namespace demcal::surrogate {
@@ -54,7 +55,11 @@ void MlpOptions::Validate() const {
   if (!(final_learning_rate > 0) || final_learning_rate > learning_rate)
     fail("final_learning_rate = " + format_number(final_learning_rate) + " must be in (0, learning_rate]");
   if (!(weight_decay >= 0) || !std::isfinite(weight_decay)) fail("weight_decay = " + format_number(weight_decay) + " must be >= 0");
+  if (refit_epochs < 1) fail("refit_epochs = " + std::to_string(refit_epochs) + " must be >= 1");
+  if (!(refit_learning_rate >= final_learning_rate) || !(refit_learning_rate <= learning_rate))
+    fail("refit_learning_rate = " + format_number(refit_learning_rate) + " must be in [final_learning_rate, learning_rate]");
   limits::require_within(limits::Limit::epochs, epochs, "surrogate mlp.epochs");
+  limits::require_within(limits::Limit::epochs, refit_epochs, "surrogate mlp.refit_epochs");
   limits::require_within(limits::Limit::network_weights, 1.0 * members * hidden_layers * hidden_width * hidden_width,
                          "surrogate mlp.members x hidden_layers x hidden_width^2");
 }
@@ -68,7 +73,9 @@ nlohmann::json MlpOptions::to_json() const {
           {"final_learning_rate", final_learning_rate},
           {"weight_decay", weight_decay},
           {"bootstrap", bootstrap},
-          {"seed", seed}};
+          {"seed", seed},
+          {"refit_epochs", refit_epochs},
+          {"refit_learning_rate", refit_learning_rate}};
 }
 
 MlpOptions MlpOptions::from_json(const nlohmann::json& j, const std::string& where) {
@@ -82,25 +89,37 @@ MlpOptions MlpOptions::from_json(const nlohmann::json& j, const std::string& whe
     else if (key == "weight_decay") o.weight_decay = value.get<double>();
     else if (key == "bootstrap") o.bootstrap = value.get<bool>();
     else if (key == "seed") o.seed = value.get<std::uint64_t>();
+    else if (key == "refit_epochs") o.refit_epochs = value.get<int>();
+    else if (key == "refit_learning_rate") o.refit_learning_rate = value.get<double>();
     else throw std::invalid_argument("unknown key");
   });
 }
 
-bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options) {
-  options.Validate();
-  members_.clear();
-  if (X.rows() != Y.rows()) throw std::invalid_argument("CurveEnsemble: X and Y have different row counts");
-  if (X.rows() < 3 || Y.cols() < 1) return false;
-  if (!X.allFinite() || !Y.allFinite()) throw std::invalid_argument("CurveEnsemble: non-finite training data");
-  const Eigen::Index n = X.rows(), d = X.cols(), m = Y.cols();
-  dimension_ = static_cast<int>(d);
-  mean_ = Y.colwise().mean().transpose();
-  scale_.resize(m);
-  for (Eigen::Index k = 0; k < m; ++k) {
-    const double sd = std::sqrt((Y.col(k).array() - mean_[k]).square().sum() / static_cast<double>(n));
-    scale_[k] = sd > 1e-12 * (1 + std::abs(mean_[k])) ? sd : 1.0;  // a constant column stays as it is
-  }
+namespace {
 
+// A bootstrap weight of one row for one member: a Poisson(1) count drawn from the row's point, so a
+// row keeps its weight when rows are added (a refined model sees the rows it was trained on as
+// before) and the weights do not depend on the rows' order.
+float poisson_weight(std::uint64_t seed, int member, const Eigen::VectorXd& unit) {
+  std::uint64_t state = seed * 0x2545f4914f6cdd1dULL + static_cast<std::uint64_t>(member);
+  for (Eigen::Index k = 0; k < unit.size(); ++k) {
+    std::uint64_t bits;
+    const double v = unit[k];
+    std::memcpy(&bits, &v, sizeof bits);
+    state = detail::mix(state ^ bits);
+  }
+  const double u = uniform01(state);
+  double p = std::exp(-1.0), cumulative = p;
+  int count = 0;
+  while (u > cumulative && count < 20) cumulative += (p /= ++count);
+  return static_cast<float>(count);
+}
+
+}  // namespace
+
+smoothing::RegressionBatch CurveEnsemble::training_batch(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y,
+                                                          const MlpOptions& options) const {
+  const Eigen::Index n = X.rows(), d = X.cols(), m = Y.cols();
   smoothing::RegressionBatch batch;
   batch.members = options.members;
   batch.rows = n;
@@ -116,25 +135,16 @@ bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, cons
     for (Eigen::Index k = 0; k < d; ++k) batch.x.push_back(static_cast<float>(2 * X(i, k) - 1));
     for (Eigen::Index k = 0; k < m; ++k) batch.y.push_back(static_cast<float>((Y(i, k) - mean_[k]) / scale_[k]));
   }
-  const std::int64_t count = smoothing::regression_parameter_count(d, m, options.hidden_layers, options.hidden_width);
-  for (int member = 0; member < options.members; ++member) {
-    std::uint64_t state = options.seed * 0x2545f4914f6cdd1dULL + static_cast<std::uint64_t>(member);
-    std::vector<float> counts(static_cast<size_t>(n), options.bootstrap ? 0.0f : 1.0f);
-    if (options.bootstrap)
-      for (Eigen::Index i = 0; i < n; ++i) counts[splitmix(state) % static_cast<std::uint64_t>(n)] += 1.0f;
-    batch.row_weight.insert(batch.row_weight.end(), counts.begin(), counts.end());
-    // Glorot-uniform weights, zero biases, in the flat layout W0, b0, W1, b1, ...
-    std::int64_t in = d;
-    for (int l = 0; l <= options.hidden_layers; ++l) {
-      const std::int64_t out = l < options.hidden_layers ? options.hidden_width : m;
-      const double limit = std::sqrt(6.0 / static_cast<double>(in + out));
-      for (std::int64_t w = 0; w < in * out; ++w) batch.initial_parameters.push_back(static_cast<float>(limit * (2 * uniform01(state) - 1)));
-      batch.initial_parameters.insert(batch.initial_parameters.end(), static_cast<size_t>(out), 0.0f);
-      in = out;
-    }
-  }
-  const std::vector<float> trained = smoothing::train_regression_ensemble(batch);
+  for (int member = 0; member < options.members; ++member)
+    for (Eigen::Index i = 0; i < n; ++i)
+      batch.row_weight.push_back(options.bootstrap ? poisson_weight(options.seed, member, X.row(i).transpose()) : 1.0f);
+  return batch;
+}
 
+void CurveEnsemble::load_members(const std::vector<float>& trained, const MlpOptions& options) {
+  const std::int64_t d = dimension_, m = mean_.size();
+  const std::int64_t count = smoothing::regression_parameter_count(d, m, options.hidden_layers, options.hidden_width);
+  members_.clear();
   for (int member = 0; member < options.members; ++member) {
     const float* p = trained.data() + static_cast<std::int64_t>(member) * count;
     Network net;
@@ -154,6 +164,60 @@ bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, cons
     }
     members_.push_back(std::move(net));
   }
+}
+
+static void check_training_data(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y) {
+  if (X.rows() != Y.rows()) throw std::invalid_argument("CurveEnsemble: X and Y have different row counts");
+  if (!X.allFinite() || !Y.allFinite()) throw std::invalid_argument("CurveEnsemble: non-finite training data");
+}
+
+bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options) {
+  options.Validate();
+  members_.clear();
+  if (X.rows() < 3 || Y.cols() < 1) return false;
+  check_training_data(X, Y);
+  const Eigen::Index n = X.rows(), d = X.cols(), m = Y.cols();
+  dimension_ = static_cast<int>(d);
+  mean_ = Y.colwise().mean().transpose();
+  scale_.resize(m);
+  for (Eigen::Index k = 0; k < m; ++k) {
+    const double sd = std::sqrt((Y.col(k).array() - mean_[k]).square().sum() / static_cast<double>(n));
+    scale_[k] = sd > 1e-12 * (1 + std::abs(mean_[k])) ? sd : 1.0;  // a constant column stays as it is
+  }
+  smoothing::RegressionBatch batch = training_batch(X, Y, options);
+  for (int member = 0; member < options.members; ++member) {
+    std::uint64_t state = options.seed * 0x2545f4914f6cdd1dULL + static_cast<std::uint64_t>(member);
+    // Glorot-uniform weights, zero biases, in the flat layout W0, b0, W1, b1, ...
+    std::int64_t in = d;
+    for (int l = 0; l <= options.hidden_layers; ++l) {
+      const std::int64_t out = l < options.hidden_layers ? options.hidden_width : m;
+      const double limit = std::sqrt(6.0 / static_cast<double>(in + out));
+      for (std::int64_t w = 0; w < in * out; ++w) batch.initial_parameters.push_back(static_cast<float>(limit * (2 * uniform01(state) - 1)));
+      batch.initial_parameters.insert(batch.initial_parameters.end(), static_cast<size_t>(out), 0.0f);
+      in = out;
+    }
+  }
+  load_members(smoothing::train_regression_ensemble(batch), options);
+  return true;
+}
+
+bool CurveEnsemble::refine(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options) {
+  options.Validate();
+  if (!fitted() || X.rows() < 3 || X.cols() != dimension_ || Y.cols() != mean_.size() ||
+      static_cast<int>(members_.size()) != options.members || options.refit_epochs < 1)
+    return false;
+  check_training_data(X, Y);
+  smoothing::RegressionBatch batch = training_batch(X, Y, options);
+  batch.epochs = options.refit_epochs;
+  batch.learning_rate = options.refit_learning_rate;
+  for (const Network& net : members_)
+    for (size_t l = 0; l < net.weight.size(); ++l) {
+      const Eigen::MatrixXd& w = net.weight[l];  // [out][in], flat layout [in][out]
+      for (Eigen::Index a = 0; a < w.cols(); ++a)
+        for (Eigen::Index b = 0; b < w.rows(); ++b) batch.initial_parameters.push_back(static_cast<float>(w(b, a)));
+      for (Eigen::Index b = 0; b < net.bias[l].size(); ++b) batch.initial_parameters.push_back(static_cast<float>(net.bias[l][b]));
+    }
+  load_members(smoothing::train_regression_ensemble(batch), options);
   return true;
 }
 

@@ -1,21 +1,15 @@
 #include "demcal/surrogate/surrogate.hpp"
 #include "internal.hpp"
 
-#include <nlopt.h>
-
 #include <algorithm>
 #include <cmath>
 #include <numeric>
-#include <random>
 #include <stdexcept>
 
 namespace demcal::surrogate {
 
 namespace {
 
-double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
-
-using detail::mix;
 using detail::vector_from;
 using detail::vector_json;
 using detail::format_number;
@@ -129,7 +123,13 @@ void SurrogateOptions::Validate() const {
   if (min_runs < 3) throw std::invalid_argument("surrogate min_runs = " + std::to_string(min_runs) + " must be >= 3");
   if (max_training_runs < 10)
     throw std::invalid_argument("surrogate max_training_runs = " + std::to_string(max_training_runs) + " must be >= 10");
+  if (batch < 0) throw std::invalid_argument("surrogate batch = " + std::to_string(batch) + " must be >= 0 (0 = the backend's workers)");
+  if (!(refit_growth >= 1) || !std::isfinite(refit_growth))
+    throw std::invalid_argument("surrogate refit_growth = " + format_number(refit_growth) + " must be finite and >= 1");
+  if (threads < 1) throw std::invalid_argument("surrogate threads = " + std::to_string(threads) + " must be >= 1");
+  if (!(cost_ratio > 0)) throw std::invalid_argument("surrogate cost_ratio = " + format_number(cost_ratio) + " must be > 0 (infinity: never adapt)");
   limits::require_within(limits::Limit::training_rows, max_training_runs, "surrogate max_training_runs");
+  limits::require_within(limits::Limit::population, batch, "surrogate batch");
   limits::require_within(limits::Limit::training_rows, min_runs, "surrogate min_runs");
   limits::require_within(limits::Limit::population, pool_factor, "surrogate pool_factor (candidates ranked per simulated one)");
   limits::require_within(limits::Limit::population, k, "surrogate k");
@@ -140,7 +140,9 @@ void SurrogateOptions::Validate() const {
 nlohmann::json SurrogateOptions::to_json() const {
   return {{"kind", kind},         {"pool_factor", pool_factor}, {"k", k},
           {"acquisition", to_string(acquisition)}, {"lcb_kappa", lcb_kappa}, {"min_runs", min_runs},
-          {"max_training_runs", max_training_runs}, {"gp", gp.to_json()}, {"mlp", mlp.to_json()}};
+          {"max_training_runs", max_training_runs}, {"batch", batch}, {"refit_growth", refit_growth},
+          {"cost_ratio", std::isfinite(cost_ratio) ? nlohmann::json(cost_ratio) : nlohmann::json("inf")},
+          {"gp", gp.to_json()}, {"mlp", mlp.to_json()}};
 }
 
 SurrogateOptions SurrogateOptions::from_json(const nlohmann::json& j, const std::string& where) {
@@ -152,6 +154,9 @@ SurrogateOptions SurrogateOptions::from_json(const nlohmann::json& j, const std:
     else if (key == "lcb_kappa") o.lcb_kappa = value.get<double>();
     else if (key == "min_runs") o.min_runs = value.get<int>();
     else if (key == "max_training_runs") o.max_training_runs = value.get<int>();
+    else if (key == "batch") o.batch = value.get<int>();
+    else if (key == "refit_growth") o.refit_growth = value.get<double>();
+    else if (key == "cost_ratio") o.cost_ratio = value == "inf" ? HUGE_VAL : value.get<double>();
     else if (key == "gp") o.gp = GpOptions::from_json(value, where + ".gp");
     else if (key == "mlp") o.mlp = MlpOptions::from_json(value, where + ".mlp");
     else throw std::invalid_argument("unknown key");
@@ -237,6 +242,24 @@ bool SurrogateModel::fit(const std::vector<TrainingRow>& all_rows) {
   if (y.size() < 3 || gp_.fit(X, y) != GpStatus::fitted) return false;
   classifier_.fit(rows);
   return condition(all_rows);
+}
+
+bool SurrogateModel::update(const std::vector<TrainingRow>& all_rows) {
+  if (options_.kind != "mlp") return condition(all_rows);
+  if (!usable()) return false;
+  const auto rows = select_training_rows(all_rows, options_.max_training_runs);
+  Eigen::MatrixXd X, Y;
+  Eigen::VectorXd y;
+  split_curve_rows(rows, X, Y, y);
+  if (mlp_log_ && !(y.array() > 0).all()) return false;  // the model space no longer fits the rows
+  if (!ensemble_.refine(X, Y, options_.mlp)) return false;
+  rows_ = static_cast<long>(rows.size());
+  classifier_.fit(rows);
+  const Eigen::ArrayXd targets = mlp_log_ ? Eigen::ArrayXd(y.array().log()) : Eigen::ArrayXd(y.array());
+  mlp_prior_sd_ = std::sqrt((targets - targets.mean()).square().mean());
+  if (!(mlp_prior_sd_ > 0)) mlp_prior_sd_ = 1.0;
+  mlp_noise_sd_ = set_incumbent(rows);
+  return true;
 }
 
 bool SurrogateModel::condition(const std::vector<TrainingRow>& all_rows) {
@@ -498,202 +521,6 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
   cv.coverage90 = static_cast<double>(covered) / static_cast<double>(cv.finite_rows);
   cv.failure_brier = brier / static_cast<double>(cv.finite_rows + cv.failed_rows);
   return cv;
-}
-
-// ---- Bayesian optimisation -------------------------------------------------------------------------
-
-namespace {
-
-double negative_score(unsigned n, const double* x, double*, void* data) {
-  const auto* model = static_cast<const SurrogateModel*>(data);
-  return -model->score(Eigen::Map<const Eigen::VectorXd>(x, n));
-}
-
-class BayesOptimiser final : public optimise::Optimiser {
- public:
-  BayesOptimiser(const optimise::ParameterSpace& space, const optimise::OptimiserOptions& options,
-                 SurrogateOptions surrogate, std::vector<TrainingRow> warm, CurveHooks hooks)
-      : Optimiser(space, options, "bo"), surrogate_(std::move(surrogate)), warm_(std::move(warm)), hooks_(std::move(hooks)) {
-    surrogate_.Validate();
-    const int d = space.dimension();
-    for (const auto& r : warm_)
-      if (r.unit.size() != d) throw std::invalid_argument("bo: a warm row has the wrong dimension");
-    long warm_finite = 0;
-    for (const auto& r : warm_) warm_finite += std::isfinite(r.fitness) ? 1 : 0;
-    const long wanted = std::max<long>(surrogate_.min_runs, options.population);
-    const long design = std::max<long>(warm_finite >= surrogate_.min_runs ? 0 : 2, wanted - warm_finite);
-    // Latin hypercube: one point per stratum of every coordinate, strata permuted per coordinate.
-    std::mt19937_64 rng(mix(options.seed));
-    design_ = Eigen::MatrixXd(design, d);
-    for (int k = 0; k < d; ++k) {
-      std::vector<long> perm(static_cast<size_t>(design));
-      std::iota(perm.begin(), perm.end(), 0);
-      for (long i = design - 1; i > 0; --i) std::swap(perm[static_cast<size_t>(i)], perm[static_cast<size_t>(rng() % static_cast<std::uint64_t>(i + 1))]);
-      for (long i = 0; i < design; ++i)
-        design_(i, k) = (static_cast<double>(perm[static_cast<size_t>(i)]) + uniform01(rng)) / static_cast<double>(design);
-    }
-    // A given start is the design's first point: a warm start from a known good set.
-    if (!options.initial_point.empty() && design > 0)
-      design_.row(0) = space.to_unit(Eigen::Map<const Eigen::VectorXd>(options.initial_point.data(), d))
-                           .cwiseMax(0.0).cwiseMin(1.0).transpose();
-  }
-
-  std::vector<Eigen::VectorXd> ask() override {
-    if (!pending_) {
-      if (done()) return {};
-      const long remaining = options_.evaluation_budget() - evaluations_;
-      pending_units_.clear();
-      const long told = static_cast<long>(told_f_.size());
-      if (told < design_.rows()) {
-        for (long i = told; i < design_.rows() && static_cast<long>(pending_units_.size()) < remaining; ++i)
-          pending_units_.push_back(design_.row(i).transpose());
-      } else {
-        pending_units_.push_back(propose());
-      }
-      pending_ = true;
-    }
-    std::vector<Eigen::VectorXd> batch;
-    for (const auto& u : pending_units_) batch.push_back(physical(u));
-    return batch;
-  }
-
-  void tell(const std::vector<double>& fitness) override {
-    if (!pending_) throw std::logic_error("bo: tell() without a pending ask()");
-    if (fitness.size() != pending_units_.size())
-      throw std::invalid_argument("bo: tell() got " + std::to_string(fitness.size()) + " values for " +
-                                  std::to_string(pending_units_.size()) + " candidates");
-    for (size_t i = 0; i < fitness.size(); ++i) {
-      record(pending_units_[i], fitness[i]);
-      told_x_.push_back(pending_units_[i]);
-      told_f_.push_back(fitness[i]);
-    }
-    pending_ = false;
-    ++iteration_;
-    update_status_after_tell();
-  }
-
-  nlohmann::json save_state() const override {
-    nlohmann::json s = save_common();
-    nlohmann::json x = nlohmann::json::array(), f = nlohmann::json::array(), pending = nlohmann::json::array();
-    for (const auto& u : told_x_) x.push_back(vector_json(u));
-    for (double v : told_f_) f.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr));
-    for (const auto& u : pending_units_) pending.push_back(vector_json(u));
-    s["told_x"] = x;
-    s["told_f"] = f;
-    s["pending"] = pending_;
-    s["pending_units"] = pending;
-    return s;
-  }
-
-  void load_state(const nlohmann::json& state) override {
-    load_common(state);
-    try {
-      told_x_.clear();
-      told_f_.clear();
-      told_outputs_.clear();
-      pending_units_.clear();
-      for (const auto& u : state.at("told_x")) told_x_.push_back(vector_from(u));
-      for (const auto& v : state.at("told_f"))
-        told_f_.push_back(v.is_null() ? std::numeric_limits<double>::quiet_NaN() : v.get<double>());
-      for (const auto& u : state.at("pending_units")) pending_units_.push_back(vector_from(u));
-      pending_ = state.at("pending").get<bool>();
-    } catch (const nlohmann::json::exception& e) {
-      throw std::invalid_argument(std::string("bo state: ") + e.what());
-    }
-    if (told_x_.size() != told_f_.size()) throw std::invalid_argument("bo state: told_x and told_f differ in length");
-  }
-
-  // The model of the last proposal (for reports).
-  const SurrogateModel& model() const { return model_; }
-
- private:
-  Eigen::VectorXd propose() {
-    const int d = space_.dimension();
-    // A told point's curves are read once (its archived runs do not change).
-    const bool curves = surrogate_.kind == "mlp" && hooks_.outputs_at;
-    while (told_outputs_.size() < told_x_.size())
-      told_outputs_.push_back(curves ? hooks_.outputs_at(told_x_[told_outputs_.size()]) : Eigen::VectorXd());
-    std::vector<TrainingRow> rows = warm_;
-    for (size_t i = 0; i < told_x_.size(); ++i) rows.push_back({told_x_[i], told_f_[i], told_outputs_[i]});
-    std::mt19937_64 rng(mix(mix(options_.seed) ^ static_cast<std::uint64_t>(iteration_ + 1)));
-    model_ = SurrogateModel(surrogate_, hooks_);
-    Eigen::VectorXd random_point(d);
-    for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
-    if (!model_.fit(rows)) return random_point;
-    std::vector<std::pair<double, Eigen::VectorXd>> scored;
-    auto add = [&](Eigen::VectorXd u) {
-      u = u.cwiseMax(0.0).cwiseMin(1.0);
-      scored.push_back({model_.score(u), u});
-    };
-    add(random_point);
-    for (int c = 1; c < 2000; ++c) {
-      Eigen::VectorXd u(d);
-      for (int k = 0; k < d; ++k) u[k] = uniform01(rng);
-      add(u);
-    }
-    // Around the best training points (finite fitness), Gaussian steps of 0.05.
-    std::vector<size_t> order;
-    for (size_t i = 0; i < rows.size(); ++i)
-      if (std::isfinite(rows[i].fitness)) order.push_back(i);
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return rows[a].fitness < rows[b].fitness; });
-    for (size_t r = 0; r < std::min<size_t>(5, order.size()); ++r)
-      for (int c = 0; c < 20; ++c) {
-        Eigen::VectorXd u = rows[order[r]].unit;
-        for (int k = 0; k < d; ++k) {
-          const double u1 = std::max(uniform01(rng), 0x1.0p-53), u2 = uniform01(rng);
-          u[k] += 0.05 * std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
-        }
-        add(u);
-      }
-    std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-    double best_score = scored.front().first;
-    Eigen::VectorXd best = scored.front().second;
-    std::vector<double> lower(static_cast<size_t>(d), 0.0), upper(static_cast<size_t>(d), 1.0), step(static_cast<size_t>(d), 0.05);
-    for (size_t s = 0; s < std::min<size_t>(3, scored.size()); ++s) {
-      std::vector<double> x(scored[s].second.data(), scored[s].second.data() + d);
-      nlopt_opt opt = nlopt_create(NLOPT_LN_BOBYQA, static_cast<unsigned>(d));
-      nlopt_set_lower_bounds(opt, lower.data());
-      nlopt_set_upper_bounds(opt, upper.data());
-      nlopt_set_min_objective(opt, negative_score, &model_);
-      nlopt_set_maxeval(opt, 60);
-      nlopt_set_initial_step(opt, step.data());
-      double value = 0;
-      nlopt_optimize(opt, x.data(), &value);
-      nlopt_destroy(opt);
-      Eigen::VectorXd u = Eigen::Map<Eigen::VectorXd>(x.data(), d).cwiseMax(0.0).cwiseMin(1.0);
-      const double sc = model_.score(u);
-      if (sc > best_score) {
-        best_score = sc;
-        best = u;
-      }
-    }
-    return best;
-  }
-
-  SurrogateOptions surrogate_;
-  std::vector<TrainingRow> warm_;
-  CurveHooks hooks_;
-  Eigen::MatrixXd design_;
-  std::vector<Eigen::VectorXd> told_x_;
-  std::vector<double> told_f_;
-  std::vector<Eigen::VectorXd> told_outputs_;  // the "mlp" kind's curves of told_x_, read once
-  std::vector<Eigen::VectorXd> pending_units_;
-  bool pending_ = false;
-  SurrogateModel model_;
-};
-
-}  // namespace
-
-std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
-                                                          const optimise::OptimiserOptions& options,
-                                                          const SurrogateOptions& surrogate,
-                                                          std::vector<TrainingRow> warm_rows, CurveHooks hooks) {
-  space.Validate();
-  if (options.population < 1) throw std::invalid_argument("bo: population must be >= 1");
-  if (options.evaluation_budget() < 1) throw std::invalid_argument("bo: the evaluation budget must be >= 1");
-  if (surrogate.kind == "mlp" && (!hooks.fitness || !hooks.outputs_at))
-    throw std::invalid_argument("bo: the mlp surrogate needs the campaign's curves (fitness and outputs hooks)");
-  return std::make_unique<BayesOptimiser>(space, options, surrogate, std::move(warm_rows), std::move(hooks));
 }
 
 }  // namespace demcal::surrogate

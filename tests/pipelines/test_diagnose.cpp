@@ -19,7 +19,6 @@ using namespace demcal::pipelines;
 using nlohmann::json;
 namespace fs = std::filesystem;
 using test_support::Realisation;
-using test_support::round_off_realisations;
 
 namespace {
 
@@ -1144,11 +1143,9 @@ TEST_P(HiddenCohesion, NamedAndRecovered) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(DiagnoseLoop, CompliantSupport, ::testing::Values(Realisation{}), test_support::realisation_name);
-INSTANTIATE_TEST_SUITE_P(DiagnoseLoop, HiddenCohesion, ::testing::Values(Realisation{}), test_support::realisation_name);
-INSTANTIATE_TEST_SUITE_P(DISABLED_RoundOff, CompliantSupport, ::testing::ValuesIn(round_off_realisations()),
+INSTANTIATE_TEST_SUITE_P(DiagnoseLoop, CompliantSupport, ::testing::Values(test_support::realisation_from_environment()),
                          test_support::realisation_name);
-INSTANTIATE_TEST_SUITE_P(DISABLED_RoundOff, HiddenCohesion, ::testing::ValuesIn(round_off_realisations()),
+INSTANTIATE_TEST_SUITE_P(DiagnoseLoop, HiddenCohesion, ::testing::Values(test_support::realisation_from_environment()),
                          test_support::realisation_name);
 
 // Every stage of the loop on the smallest search that still runs each of them (one free base
@@ -1260,13 +1257,17 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
   EXPECT_TRUE(d["held_out"]["error"].is_number());
   EXPECT_TRUE(d["held_out"]["checks"].is_array());  // those of them the base fit reproduces
   int tried = 0;
+  double top_signature = 0;
+  for (const auto& c : d["candidates"]) top_signature = std::max(top_signature, c["signature_score"].get<double>());
   for (const auto& c : d["candidates"])
     if (c["tried"].get<bool>()) {
       ++tried;
       EXPECT_TRUE(c["held_out_error"].is_number()) << c.dump();
       EXPECT_TRUE(c["held_out_rms"].contains("check/load_vertical")) << c.dump();
+      // --candidates 1: the best signature, and another only when it comes within the close share (0.9)
+      EXPECT_GE(c["signature_score"].get<double>(), 0.9 * top_signature) << c.dump();
     }
-  EXPECT_EQ(tried, 1);
+  EXPECT_GE(tried, 1);
   // Search ranges: the supports' from the registry; the compressive strength's from the largest
   // contact stress the base fit reaches (a cap above it never acts), probed and reported.
   ASSERT_TRUE(d["peak_normal_stress"].is_number()) << d.dump();
@@ -1330,11 +1331,11 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
            " --effects support-compliance,crushing-cap --candidate-simulations 12 --max-simulations 72 --no-report";
   };
   ASSERT_EQ(std::system((command("whole") + " > /dev/null 2>&1").c_str()), 0);
-  // killed (SIGKILL, nothing flushed) half a second into the first candidate's calibration, which
-  // the progress lines announce
+  // killed (SIGKILL, nothing flushed) as the first candidate's calibration starts, which the
+  // progress lines announce
   const std::string log = (dir / "killed.log").string();
   const std::string killed = "sh -c '" + command("killed") + " > /dev/null 2> " + log + " & pid=$!; while kill -0 $pid 2>/dev/null && ! grep -q \"calibrating base +\" " +
-                             log + "; do sleep 0.05; done; sleep 0.5; kill -9 $pid; wait $pid; exit 0'";
+                             log + "; do sleep 0.01; done; kill -9 $pid; wait $pid; exit 0'";
   ASSERT_EQ(std::system(killed.c_str()), 0);
   ASSERT_FALSE(fs::exists(dir / "killed" / "diagnosis.json")) << "the run ended before it was killed";
   ASSERT_EQ(std::system(("grep -q \"calibrating base +\" " + log).c_str()), 0) << "killed before its candidates";
@@ -1352,6 +1353,7 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
   EXPECT_EQ(resumed["simulations"], whole["simulations"]);
   for (json* d : {&whole, &resumed}) {
     d->erase("wall_time_s");
+    d->erase("timing");
     d->erase("session");
   }
   EXPECT_EQ(resumed, whole) << "the resumed diagnosis differs from the uninterrupted one: " << json::diff(whole, resumed).dump();
@@ -1468,38 +1470,18 @@ void close_candidates_calibrated(const Diagnose& diagnose, const fs::path& dir) 
   EXPECT_EQ(close["simulations"], result["simulations"]);
 }
 
-// A fit left above the error floor is searched further (its calibration continued on every
-// archived run of it), and the closer of the two fits is the diagnosis's: an accepted effect here,
-// the contenders of an unexplained residual in contenders_searched_further. --continued-simulations
-// 0 runs none. One folder: each diagnosis, run without and then resumed with the further search,
-// reads every earlier stage back from the archive.
-TEST(DiagnoseLoop, AFitLeftAboveTheFloorIsSearchedFurther) {
-  const fs::path dir = test_support::fresh_dir("diagnose", "continued");
-  const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, cli_arch());
-  const json j = fast_campaign("continued", measured, {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}},
-                               {{"kn", 2.6e9}, {"ks", 0.9e9}});
-  std::ofstream(dir / "campaign.json") << j.dump(2);
-  const auto diagnose = [&](const std::string& options, const std::string& continued) {
-    const std::string command = std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() +
-                                " --out " + (dir / "diag").string() +
-                                " --quiet --no-report --no-parameter-bounds --candidate-simulations 24 --evidence 1"
-                                " --resume " + options + " --continued-simulations " + continued + " > /dev/null 2>&1";
-    EXPECT_EQ(std::system(command.c_str()), 0) << command;
-    return test_support::read_json(dir / "diag" / "diagnosis.json");
-  };
-  const json once = diagnose("--effects support-compliance", "0");
-  EXPECT_FALSE(fs::exists(dir / "diag" / "candidates" / "support-compliance-continued"));
-  const json further = diagnose("--effects support-compliance", "12");
-  // the first search's fit: accepted, above the floor (the precondition of this half)
-  ASSERT_EQ(once["chosen"], json::array({"support-compliance"})) << once["verdict"];
+// The accepted effect's fit, above the floor, searched further in a calibration of its own.
+void searched_further(const json& once, const json& further, const fs::path& dir) {
+  EXPECT_EQ(once["chosen"], json::array({"support-compliance"})) << once["verdict"];
   const json& first = once["candidates"][0];
-  EXPECT_FALSE(first.contains("continued")) << first.dump();
   const double explained =
       DiagnoseOptions{}.noise_level_ratio * error_floor(overall(once["noise"]), overall(once["scatter"]), DiagnoseOptions{});
-  ASSERT_GT(first["error"].get<double>(), explained) << "the first fit is already explained: nothing to continue";
-
-  // the same diagnosis up to the further search, which ran its budget in a calibration of its own
   const json& c = further["candidates"][0];
+  if (first["error"].get<double>() <= explained) {  // already explained: nothing to continue
+    EXPECT_FALSE(c.contains("continued")) << c.dump();
+    return;
+  }
+  // the same diagnosis up to the further search, which ran its budget in a calibration of its own
   ASSERT_TRUE(c.contains("continued")) << c.dump();
   const json& continued = c["continued"];
   EXPECT_EQ(continued["error_before"], first["error"]);
@@ -1521,6 +1503,44 @@ TEST(DiagnoseLoop, AFitLeftAboveTheFloorIsSearchedFurther) {
   EXPECT_EQ(further["simulations"].get<long>(),
             once["simulations"].get<long>() + continued["simulations"].get<long>() + 1 + DiagnoseOptions{}.scatter_runs);
   EXPECT_LT(further["session"]["simulated"].get<long>(), further["simulations"].get<long>());  // the calibrations read back
+}
+
+// A fit left above the error floor is searched further (its calibration continued on every
+// archived run of it), and the closer of the two fits is the diagnosis's: an accepted effect or
+// the one contender of an unexplained residual here, two tied contenders in
+// contenders_searched_further. --continued-simulations
+// 0 runs none. One folder: each diagnosis, run without and then resumed with the further search,
+// reads every earlier stage back from the archive.
+TEST(DiagnoseLoop, AFitLeftAboveTheFloorIsSearchedFurther) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "continued");
+  const fs::path measured = make_measurement(compliant_right_abutment(1e6), dir, 2, cli_arch());
+  const json j = fast_campaign("continued", measured, {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}},
+                               {{"kn", 2.6e9}, {"ks", 0.9e9}});
+  std::ofstream(dir / "campaign.json") << j.dump(2);
+  const auto diagnose = [&](const std::string& options, const std::string& continued) {
+    const std::string command = std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() +
+                                " --out " + (dir / "diag").string() +
+                                " --quiet --no-report --no-parameter-bounds --candidate-simulations 24 --evidence 1"
+                                " --resume " + options + " --continued-simulations " + continued + " > /dev/null 2>&1";
+    EXPECT_EQ(std::system(command.c_str()), 0) << command;
+    return test_support::read_json(dir / "diag" / "diagnosis.json");
+  };
+  const json once = diagnose("--effects support-compliance", "0");
+  EXPECT_FALSE(fs::exists(dir / "diag" / "candidates" / "support-compliance-continued"));
+  const json further = diagnose("--effects support-compliance", "12");
+  const json& first = once["candidates"][0];
+  EXPECT_FALSE(first.contains("continued")) << first.dump();
+  const json& c = further["candidates"][0];
+  if (first["verdict"] != "accepted") {
+    // rejected (the search's luck on this realisation): neither chosen nor a contender, so not
+    // searched further, and the further run's diagnosis is the first's
+    EXPECT_TRUE(once["chosen"].empty()) << once["verdict"];
+    EXPECT_FALSE(c.contains("continued")) << c.dump();
+    EXPECT_EQ(further["verdict"], once["verdict"]);
+    EXPECT_EQ(further["simulations"], once["simulations"]);
+  } else {
+    searched_further(once, further, dir);
+  }
 
   contenders_searched_further(diagnose, dir);
   close_targets_calibrated(diagnose, dir);

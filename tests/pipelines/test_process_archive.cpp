@@ -187,10 +187,14 @@ TEST(Progress, FormatsAPlainLine) {
   s.total = 200;
   s.best = 123.4;
   s.elapsed_s = 12;
+  s.simulation_s = 9;
+  s.model_s = 2;
   s.done_this_session = 30;
-  EXPECT_EQ(format_progress(s), "iteration 3/20  simulations 30/200  best 123.4  elapsed 12 s  left ~1 min 08 s");
+  EXPECT_EQ(format_progress(s),
+            "iteration 3/20  simulations 30/200  best 123.4  elapsed 12 s (simulations 9 s, model 2 s)  left ~1 min 08 s");
   s.iterations = 0;  // not known in advance
-  EXPECT_EQ(format_progress(s), "iteration 3  simulations 30/200  best 123.4  elapsed 12 s  left ~1 min 08 s");
+  EXPECT_EQ(format_progress(s),
+            "iteration 3  simulations 30/200  best 123.4  elapsed 12 s (simulations 9 s, model 2 s)  left ~1 min 08 s");
   s.iterations = 2;  // never "3/2"
   EXPECT_EQ(format_progress(s).rfind("iteration 3  simulations", 0), 0u);
   EXPECT_EQ(format_duration(3725), "1 h 02 min");

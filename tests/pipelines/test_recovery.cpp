@@ -157,6 +157,5 @@ TEST_P(Recovery, SyntheticArchMeasurementIsCalibratedBack) {
             << "\n";
 }
 
-INSTANTIATE_TEST_SUITE_P(Synthetic, Recovery, ::testing::Values(Realisation{}), test_support::realisation_name);
-INSTANTIATE_TEST_SUITE_P(DISABLED_RoundOff, Recovery, ::testing::ValuesIn(test_support::round_off_realisations()),
+INSTANTIATE_TEST_SUITE_P(Synthetic, Recovery, ::testing::Values(test_support::realisation_from_environment()),
                          test_support::realisation_name);

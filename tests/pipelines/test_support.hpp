@@ -6,10 +6,12 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -23,9 +25,10 @@ inline const std::string kToySimulator = std::string(DEMCAL_SOURCE_DIR) + "/test
 inline std::string python() { return fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3"; }
 
 // One realisation of the engine's round-off: the automatic time step's face rule and its safety
-// factor moved by k x 1e-14, the same physics. The CI runs the default; instances named
-// DISABLED_RoundOff count how a test on a chaotic curve fares over others (docs/journal/diagnose-studies.md),
-// run with --gtest_also_run_disabled_tests.
+// factor moved by k x 1e-14, the same physics. The tests on a chaotic curve run the one that
+// DEMCAL_TEST_REALISATION names ("FACES:K", e.g. "all:1"; default: the engine's own, k = 0) and
+// assert on it whatever it is; scripts/round_off_rates.sh runs them on eight and counts how often
+// they pass, a benchmark's figure (docs/journal/diagnose-studies.md).
 struct Realisation {
   std::string faces = dem::SolverSettings{}.time_step_faces;
   int k = 0;
@@ -43,13 +46,17 @@ inline void PrintTo(const Realisation& r, std::ostream* os) { *os << r.name(); }
 
 inline std::string realisation_name(const ::testing::TestParamInfo<Realisation>& info) { return info.param.name(); }
 
-// Both face rules at k = 0, 1, -1, 2, less the default (the CI's).
-inline std::vector<Realisation> round_off_realisations() {
-  std::vector<Realisation> out;
-  for (const char* faces : {"all", "in_contact"})
-    for (int k : {0, 1, -1, 2})
-      if (!(faces == Realisation{}.faces && k == 0)) out.push_back({faces, k});
-  return out;
+// The realisation DEMCAL_TEST_REALISATION names, else the default. A malformed value throws.
+inline Realisation realisation_from_environment() {
+  Realisation r;
+  const char* text = std::getenv("DEMCAL_TEST_REALISATION");
+  if (text == nullptr || *text == 0) return r;
+  const std::string value = text;
+  const auto colon = value.find(':');
+  if (colon == std::string::npos) throw std::invalid_argument("DEMCAL_TEST_REALISATION = '" + value + "' (expected FACES:K)");
+  r.faces = value.substr(0, colon);
+  r.k = std::stoi(value.substr(colon + 1));
+  return r;
 }
 
 // An empty folder under the temporary directory, named after the suite and the case.

@@ -258,6 +258,44 @@ TEST_P(SurrogateKinds, ArchiveAndOptimiserNeverHoldAPrediction) {
   EXPECT_EQ(warm["surrogate"]["simulated"], 36) << "screened from the first iteration on";
 }
 
+// "bo" on a backend of 2 parallel programs proposes 2 points per round, so both simulate; the
+// result says how the time divided between the simulations and the model, and how well the model
+// predicted each point before it was simulated. With the default cost ratio the batch may grow,
+// and the result says why.
+TEST_P(SurrogateKinds, BayesRoundsFillTheWorkersAndReportTheirTime) {
+  const auto dir = fresh_dir("bo-batches-" + GetParam());
+  json campaign = toy_campaign(dir, 3, GetParam());
+  campaign["optimiser"] = {{"algorithm", "bo"}, {"population", 8}, {"max_evaluations", 20}, {"seed", 3}};
+  campaign["surrogate"] = {{"kind", GetParam()}, {"min_runs", 8}, {"cost_ratio", "inf"}};
+  std::ofstream(dir / "campaign.json") << campaign.dump(2);
+  const auto r = calibrate(dir / "campaign.json", dir / "fixed", false);
+  ASSERT_TRUE(r.ok()) << r.message;
+  const json fixed = read_json(dir / "fixed" / "result.json");
+  EXPECT_EQ(fixed["simulations"], 20);
+  EXPECT_EQ(fixed["surrogate"]["batch"], 2) << "one point per parallel program";
+  EXPECT_EQ(fixed["surrogate"]["batch_reason"], "");
+  EXPECT_EQ(fixed["iterations"], 1 + (20 - 8) / 2) << "the design, then rounds of 2";
+  EXPECT_EQ(fixed["surrogate"]["predicted"], 12) << "every proposed point was predicted before it ran";
+  EXPECT_TRUE(fixed["surrogate"]["prequential_error"].is_number());
+  const double coverage = fixed["surrogate"]["prequential_coverage90"].get<double>();
+  EXPECT_TRUE(coverage >= 0 && coverage <= 1);
+  const json& t = fixed["timing"];
+  EXPECT_GT(t["model_s"].get<double>(), 0);
+  EXPECT_GT(t["simulations_s"].get<double>(), 0);
+  EXPECT_LE(t["model_s"].get<double>() + t["simulations_s"].get<double>(), t["wall_s"].get<double>());
+
+  campaign["surrogate"].erase("cost_ratio");
+  std::ofstream(dir / "adaptive.json") << campaign.dump(2);
+  const auto a = calibrate(dir / "adaptive.json", dir / "adaptive", false);
+  ASSERT_TRUE(a.ok()) << a.message;
+  const json adaptive = read_json(dir / "adaptive" / "result.json");
+  const int batch = adaptive["surrogate"]["batch"].get<int>();
+  EXPECT_TRUE(batch == 2 || batch == 4) << batch;
+  const std::string reason = adaptive["surrogate"]["batch_reason"].get<std::string>();
+  EXPECT_NE(reason.find(batch > 2 ? "batches of " + std::to_string(batch) : "batches kept"), std::string::npos) << reason;
+  EXPECT_NE(reason.find("s of model time, a simulation"), std::string::npos) << reason;
+}
+
 // kill -9 during a screened campaign, then --resume: the result is the uninterrupted one.
 TEST_P(SurrogateKinds, KilledAndResumedEndsWithTheUninterruptedResult) {
   const auto dir = fresh_dir("resume-" + GetParam());
@@ -293,6 +331,7 @@ TEST_P(SurrogateKinds, KilledAndResumedEndsWithTheUninterruptedResult) {
   ASSERT_TRUE(last.ok()) << last.message;
   auto comparable = [](json j) {
     j.erase("wall_time_s");
+    j.erase("timing");
     j.erase("session");
     j.erase("archive");
     return j;

@@ -52,6 +52,7 @@ std::string read_text(const fs::path& path) {
 json comparable(const fs::path& result) {
   json j = json::parse(read_text(result));
   j.erase("wall_time_s");
+  j.erase("timing");
   j.erase("session");
   j.erase("archive");
   return j;

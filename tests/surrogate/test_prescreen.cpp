@@ -86,14 +86,18 @@ TEST(Prescreen, OptimiserOnlyEverHoldsSimulatedValues) {
       }
       opt->tell(told);
       if (opt->iteration() == 1) first_generation_best = opt->best_value();
-      if (std::isfinite(opt->best_value())) EXPECT_TRUE(simulated_values.count(opt->best_value())) << algorithm;
+      if (std::isfinite(opt->best_value())) {
+        EXPECT_TRUE(simulated_values.count(opt->best_value())) << algorithm;
+      }
     }
     EXPECT_EQ(opt->evaluations(), simulations) << algorithm;
     EXPECT_EQ(simulations, 80) << algorithm << ": the budget counts simulations";
     EXPECT_GT(screened_out, 0) << algorithm;
     // Optimum 1.0. The swarms get there within 80 simulations; the paper's GA (reset mutation) is
     // slower but must improve on its random first generation.
-    if (std::string(algorithm) != "ga") EXPECT_LT(opt->best_value(), 1.05) << algorithm;
+    if (std::string(algorithm) != "ga") {
+      EXPECT_LT(opt->best_value(), 1.05) << algorithm;
+    }
     EXPECT_LT(opt->best_value(), first_generation_best) << algorithm;
   }
 }

@@ -242,6 +242,9 @@ struct CampaignResult {
   std::vector<double> best_history;          // best fitness after each candidate (convergence)
   std::vector<ParameterSet> all;             // every evaluation, in order
   double wall_time_s = 0;                    // this session
+  double model_time_s = 0;                   // this session: choosing candidates (surrogate fits and search)
+  double simulation_time_s = 0;              // this session: waiting for simulations and their fitness
+  double run_time_s = 0;                     // this session: the simulated runs' own times, summed
   long simulated_this_session = 0;           // runs actually simulated (not read from the archive)
   long reused_from_archive = 0;
   std::string optimiser_status;
@@ -260,6 +263,15 @@ struct CampaignResult {
   long surrogate_simulated = 0;
   long surrogate_screened_out = 0;
   double surrogate_cv_error = std::numeric_limits<double>::quiet_NaN();
+  // "bo": points per round and why (the cost-aware decision), points proposed by the model, and
+  // the prequential check: the relative error (mean |ŷ − y| / mean |y − ȳ|) and 90 % interval
+  // coverage of the model's predictions of those that ran (finite fitness), each made before the
+  // point was simulated.
+  int surrogate_batch = 0;
+  std::string surrogate_batch_reason;
+  long surrogate_predicted = 0;
+  double surrogate_prequential_error = std::numeric_limits<double>::quiet_NaN();
+  double surrogate_prequential_coverage90 = std::numeric_limits<double>::quiet_NaN();
   nlohmann::json surrogate_iterations = nlohmann::json::array();
   nlohmann::json to_json() const;            // the result.json layout
 };

@@ -407,6 +407,8 @@ struct Diagnosis {
   long simulations = 0;
   long simulated_this_session = 0;         // of them, run by this process (the rest from the archive)
   double wall_time_s = 0;
+  double simulation_time_s = 0;            // this session: waiting for simulations (probes and calibrations)
+  double model_time_s = 0;                 // this session: the calibrations' surrogate fits and search
   nlohmann::json to_json() const;          // the diagnosis.json layout
 };
 

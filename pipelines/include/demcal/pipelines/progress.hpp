@@ -17,10 +17,12 @@ struct ProgressState {
   double best = 0;            // best fitness so far (NaN/inf before any)
   double elapsed_s = 0;       // this session
   long done_this_session = 0; // simulations finished in this session (for the rate)
+  double model_s = 0;         // this session: choosing candidates (surrogate fits and search)
+  double simulation_s = 0;    // this session: waiting for simulations
 };
 
-// "iteration 3/20  simulations 30/200  best 123.4  elapsed 12 s  left ~1 min 08 s"; the "/20" only
-// while the plan is known and not passed.
+// "iteration 3/20  simulations 30/200  best 123.4  elapsed 12 s (simulations 9 s, model 2 s)
+// left ~1 min 08 s"; the "/20" only while the plan is known and not passed.
 std::string format_progress(const ProgressState& state);
 // "1 h 02 min", "3 min 05 s", "42 s"
 std::string format_duration(double seconds);

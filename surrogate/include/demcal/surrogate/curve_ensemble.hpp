@@ -7,10 +7,15 @@
 //
 // Training (LibTorch, in the plugin: smoothing/regression_ensemble.hpp): inputs 2u − 1, outputs
 // standardised per column over the training rows; each member starts from its own Glorot-uniform
-// draw and, with `bootstrap`, weighs the rows by a bootstrap resample (counts), so the members
-// disagree where the data are thin. Prediction is a plain forward pass here (Eigen, double).
-// Both are deterministic functions of the rows and the options.
+// draw and, with `bootstrap`, weighs each row by a Poisson(1) count drawn from the row's point (a
+// bootstrap that gives a row the same weight whatever rows join it), so the members disagree where
+// the data are thin. refine() continues from the current weights on more rows, keeping the output
+// standardisation: the cheap refit of a model whose rows grow a few at a time. Prediction is a
+// plain forward pass here (Eigen, double). Both are deterministic functions of the rows, the
+// options and (refine) the previous weights.
 #pragma once
+
+#include "demcal/smoothing/regression_ensemble.hpp"
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
@@ -32,6 +37,9 @@ struct MlpOptions {
   double weight_decay = 0.1;          // decoupled, per step x learning rate, >= 0
   bool bootstrap = true;              // each member weighs the rows by a bootstrap resample
   std::uint64_t seed = 1;             // initial weights and resamples
+  int refit_epochs = 300;             // Adam steps of refine(), >= 1
+  double refit_learning_rate = 0.002; // refine()'s first learning rate (cosine to final_learning_rate),
+                                      // in [final_learning_rate, learning_rate]
   // Throws std::invalid_argument naming the option and value.
   void Validate() const;
   nlohmann::json to_json() const;
@@ -43,6 +51,10 @@ class CurveEnsemble {
   // X: [rows][dimension] unit points; Y: [rows][outputs]. Returns false with fewer than 3 rows.
   // Throws std::runtime_error when the LibTorch plugin cannot be loaded.
   bool fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options);
+  // Continues training from the current weights on these rows (options.refit_epochs steps from
+  // options.refit_learning_rate). Returns false, changing nothing, when not fitted, with fewer than
+  // 3 rows or with other dimensions or members than the fitted ensemble.
+  bool refine(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options);
   bool fitted() const { return !members_.empty(); }
   int members() const { return static_cast<int>(members_.size()); }
   int dimension() const { return dimension_; }
@@ -59,6 +71,10 @@ class CurveEnsemble {
     std::vector<Eigen::MatrixXd> weight;  // per layer, [out][in]
     std::vector<Eigen::VectorXd> bias;
   };
+  smoothing::RegressionBatch training_batch(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y,
+                                            const MlpOptions& options) const;
+  void load_members(const std::vector<float>& trained, const MlpOptions& options);
+
   std::vector<Network> members_;
   int dimension_ = 0;
   Eigen::VectorXd mean_, scale_;          // output standardisation

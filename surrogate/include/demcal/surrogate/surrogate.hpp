@@ -24,9 +24,10 @@
 //   slots with the best acquisition are kept and the others withdrawn (Optimiser::withdraw). The
 //   optimiser is then told simulated values for the kept slots and NaN for the withdrawn ones: it
 //   never receives a prediction.
-// - BayesOptimiser ("bo"): a pure surrogate-driven search behind the same ask/tell interface: an
-//   initial Latin-hypercube design, then one candidate per iteration, the acquisition's optimum under
-//   the GP refitted on every told value (plus any warm rows from earlier campaigns).
+// - BayesOptimiser ("bo", bayes_optimiser.cpp): a pure surrogate-driven search behind the same
+//   ask/tell interface: an initial Latin-hypercube design, then rounds of a batch of candidates
+//   (one per worker), the penalised acquisition's optima under the model refitted on every told
+//   value (plus any warm rows from earlier campaigns).
 // - cross_validate(): k-fold held-out error and the coverage of the 90 % predictive intervals.
 #pragma once
 
@@ -63,6 +64,10 @@ struct CurveHooks {
   // The outputs of a simulated point (its archived runs), for "bo", which is told fitness values
   // only; empty when unknown.
   std::function<Eigen::VectorXd(const Eigen::VectorXd& unit)> outputs_at;
+  // "bo", any kind: the wall time a worker spends per simulation so far (its fitness included),
+  // in seconds: a round of one simulation per worker takes that long (cost-aware batches,
+  // SurrogateOptions::cost_ratio). Empty or <= 0 when unknown: the batch stays as set.
+  std::function<double()> seconds_per_simulation;
 };
 
 // Probability that a run at a point fails: a Nadaraya-Watson kernel estimate with a Gaussian kernel
@@ -105,6 +110,18 @@ struct SurrogateOptions {
   int min_runs = 10;                 // finished runs needed before the screen switches on (and the
                                      // initial design of "bo"), >= 3
   int max_training_runs = 400;       // at most this many rows (select_training_rows), >= 10
+  int batch = 0;                     // "bo": points proposed per round; 0 = the backend's workers
+  // A full refit ("mlp": from fresh weights; "gp": hyperparameters) when the rows have grown by
+  // this factor since the last one; in between, update(): "mlp" continues from its weights
+  // (mlp.refit_epochs), "gp" keeps its hyperparameters. 1 = a full refit every round, >= 1.
+  double refit_growth = 1.5;
+  // "bo": when a round's model time exceeds cost_ratio x its simulations' wall time, the batch grows
+  // (up to 2 x) so that fewer rounds share the simulations; infinity ("inf") = never. > 0.
+  double cost_ratio = 1.0;
+  // Threads that score the acquisition's candidate points ("bo"). Not part of the options' JSON:
+  // results do not depend on it. (Training stays on one thread: LibTorch's matrix products call a
+  // BLAS that may not be safe to call from two threads at once, and results then differed run to run.)
+  int threads = 1;
   GpOptions gp;                      // "gp"; its log_transform also rules the "mlp" kind's
   MlpOptions mlp;                    // "mlp"
   // Throws std::invalid_argument naming the option and value.
@@ -141,6 +158,10 @@ class SurrogateModel {
   // "gp": keeps the hyperparameters of a trained model and conditions on these rows instead.
   // "mlp" (no hyperparameters): trains anew on these rows.
   bool condition(const std::vector<TrainingRow>& rows);
+  // The cheap refit of a fitted model on rows that grew: "mlp" continues training from the current
+  // weights (CurveEnsemble::refine), "gp" conditions with the kept hyperparameters. Returns false,
+  // leaving the model as it was, when the model is not fitted or cannot take the rows (then fit()).
+  bool update(const std::vector<TrainingRow>& rows);
   bool usable() const { return options_.kind == "mlp" ? ensemble_.fitted() : gp_.fitted(); }
   int dimension() const;
   bool log_transformed() const;
@@ -213,10 +234,14 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
 
 // "bo": Bayesian optimisation behind the ask/tell interface (see the header comment). The initial
 // design has max(options.min_runs, population) points minus the warm rows inside the space
-// (at least 2 unless the warm rows already make a usable model); then one point per iteration: the
-// acquisition's maximum over 2000 random points and 20 alternatives around each of the 5 best
-// training points, polished by NLopt LN_BOBYQA from the best 3. Deterministic; save_state() holds
-// the told history, so load_state() refits and continues exactly.
+// (at least 2 unless the warm rows already make a usable model); then rounds of `batch` points
+// (SurrogateOptions::batch, at least 1): each point the maximum of the acquisition, locally
+// penalised around the points already in the round, over 2000 random points and 20 alternatives
+// around each of the 5 best training points, polished by NLopt LN_BOBYQA from the best 3. The model
+// is refitted fully or updated per SurrogateOptions::refit_growth; with hooks.seconds_per_simulation
+// the batch grows once per cost_ratio. Deterministic given the rows and that decision; save_state()
+// holds the told history, the model's predictions of each proposed point, the refits and the batch,
+// so load_state() replays the refits and continues exactly.
 std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
                                                           const optimise::OptimiserOptions& options,
                                                           const SurrogateOptions& surrogate,
