@@ -88,7 +88,7 @@ struct SurrogateSetup {
   std::vector<ArchivedCase> archived_cases;
   std::optional<surrogate::SurrogateModel> trained_model;
   surrogate::CurveHooks hooks;  // the "mlp" kind: the fitness of predicted curves, a told point's curves
-  surrogate::SurrogateOptions options;  // the campaign's, with the batch and training threads resolved
+  surrogate::SurrogateOptions options;  // the campaign's, with the batch and the scoring threads resolved
   // This session's evaluation rounds: wall seconds and simulated runs (the cost of a simulation as
   // the user waits for it, fitness included), and the runs' own seconds summed.
   struct Clock {

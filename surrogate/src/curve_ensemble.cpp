@@ -115,6 +115,11 @@ float poisson_weight(std::uint64_t seed, int member, const Eigen::VectorXd& unit
   return static_cast<float>(count);
 }
 
+void check_training_data(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y) {
+  if (X.rows() != Y.rows()) throw std::invalid_argument("CurveEnsemble: X and Y have different row counts");
+  if (!X.allFinite() || !Y.allFinite()) throw std::invalid_argument("CurveEnsemble: non-finite training data");
+}
+
 }  // namespace
 
 smoothing::RegressionBatch CurveEnsemble::training_batch(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y,
@@ -166,14 +171,10 @@ void CurveEnsemble::load_members(const std::vector<float>& trained, const MlpOpt
   }
 }
 
-static void check_training_data(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y) {
-  if (X.rows() != Y.rows()) throw std::invalid_argument("CurveEnsemble: X and Y have different row counts");
-  if (!X.allFinite() || !Y.allFinite()) throw std::invalid_argument("CurveEnsemble: non-finite training data");
-}
-
 bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options) {
   options.Validate();
   members_.clear();
+  if (X.rows() != Y.rows()) throw std::invalid_argument("CurveEnsemble: X and Y have different row counts");
   if (X.rows() < 3 || Y.cols() < 1) return false;
   check_training_data(X, Y);
   const Eigen::Index n = X.rows(), d = X.cols(), m = Y.cols();

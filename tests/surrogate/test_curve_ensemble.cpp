@@ -177,16 +177,31 @@ TEST(CrossValidation, MlpKindReportsErrorAndCoverage) {
   EXPECT_GE(cv.coverage90, 0.75);
 }
 
-// "bo" with the mlp kind: the optimiser is told fitness values only and finds each told point's
-// curves through CurveHooks::outputs_at; it reaches the measurement's basin and resumes exactly.
-TEST(BayesOptimiser, MlpKindFindsTheBasinAndResumesExactly) {
+namespace {
+
+// The curve family's two parameters, a and b, each on [0, 1].
+demcal::optimise::ParameterSpace unit_square() {
   demcal::optimise::ParameterSpace space;
   space.add("a", 0, 1);
   space.add("b", 0, 1);
+  return space;
+}
+
+demcal::optimise::OptimiserOptions bayes_options(long simulations, std::uint64_t seed) {
   demcal::optimise::OptimiserOptions o;
   o.population = 8;
-  o.max_evaluations = 20;
-  o.seed = 3;
+  o.max_evaluations = simulations;
+  o.seed = seed;
+  return o;
+}
+
+}  // namespace
+
+// "bo" with the mlp kind: the optimiser is told fitness values only and finds each told point's
+// curves through CurveHooks::outputs_at; it reaches the measurement's basin and resumes exactly.
+TEST(BayesOptimiser, MlpKindFindsTheBasinAndResumesExactly) {
+  const auto space = unit_square();
+  const auto o = bayes_options(20, 3);
   CurveHooks hooks;
   hooks.fitness = fitness_of;
   EXPECT_THROW(make_bayes_optimiser(space, o, mlp_options(), {}, hooks), std::invalid_argument)
@@ -221,13 +236,8 @@ TEST(BayesOptimiser, MlpKindFindsTheBasinAndResumesExactly) {
 // distinct, the model is updated between full refits, and a resumed run (state saved after
 // updates) replays the refits and ends with the uninterrupted run's history.
 TEST(BayesOptimiser, ProposesDistinctBatchesAndResumesAfterUpdatesExactly) {
-  demcal::optimise::ParameterSpace space;
-  space.add("a", 0, 1);
-  space.add("b", 0, 1);
-  demcal::optimise::OptimiserOptions o;
-  o.population = 8;
-  o.max_evaluations = 26;
-  o.seed = 4;
+  const auto space = unit_square();
+  const auto o = bayes_options(26, 4);
   SurrogateOptions s = mlp_options();
   s.batch = 3;
   s.mlp.epochs = 600;
