@@ -19,7 +19,6 @@
 #include <iostream>
 #include <limits>
 #include <memory>
-#include <numeric>
 #include <optional>
 #include <set>
 
@@ -42,7 +41,7 @@ namespace {
 
 // ---- run_campaign's stages ----------------------------------------------------------------------
 
-// Wall time since the campaign started (this session).
+// Wall time since it was made: the campaign's (this session), a stage's.
 class Stopwatch {
  public:
   double elapsed_s() const {
@@ -295,10 +294,6 @@ struct SessionCounts {
   double simulation_s = 0;   // waiting for the simulations and their fitness
 };
 
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 // Progress lines: the planned totals and what is done so far.
 struct CampaignProgress {
   ProgressPrinter printer;
@@ -520,21 +515,22 @@ SessionCounts run_iterations(const CampaignContext& ctx, CampaignOptimisers& opt
   for (int iteration = first_iteration;; ++iteration) {
     optimise::Optimiser* asking = optimisers.active();
     if (!asking) break;
-    const auto asked = std::chrono::steady_clock::now();
+    const Stopwatch asking_time;
     std::optional<ProposedBatch> next = propose_batch(ctx, optimisers, *asking);
-    counts.model_s += seconds_since(asked);
+    counts.model_s += asking_time.elapsed_s();
     progress.state.model_s = counts.model_s;
     if (!next) break;
     ProposedBatch& proposed = *next;
     progress.state.iteration = iteration + 1;
     std::vector<std::map<std::string, double>> candidates;
     for (size_t slot : proposed.slots) candidates.push_back(config.space.values(proposed.batch[slot]));
-    const auto simulating = std::chrono::steady_clock::now();
+    const Stopwatch simulating;
     const long simulated_before = counts.simulated;
     const CandidateFitness evaluated = evaluate_candidates(ctx, candidates, fitness_threads, counts, progress);
-    counts.simulation_s += seconds_since(simulating);
+    const double round_s = simulating.elapsed_s();
+    counts.simulation_s += round_s;
     if (counts.simulated > simulated_before) {  // rounds read from the archive cost no simulation
-      ctx.surrogate.clock->round_s += seconds_since(simulating);
+      ctx.surrogate.clock->round_s += round_s;
       ctx.surrogate.clock->runs += counts.simulated - simulated_before;
     }
     progress.state.simulation_s = counts.simulation_s;
@@ -569,35 +565,6 @@ std::vector<ReportInputs::Failure> failed_runs(const CampaignContext& ctx, const
     }
   }
   return failures;
-}
-
-// "bo": how well the model predicted each proposed point before it was simulated (prequential:
-// every point held out when predicted), from the optimiser's saved state, and its batch decision.
-void bayes_statistics(const json& saved, CampaignResult& result) {
-  const json& state = saved.contains("swarm") ? saved.at("swarm") : saved;
-  const auto& predictions = state.at("told_predictions");
-  const auto& told = state.at("told_f");
-  std::vector<double> errors, ys;
-  long covered = 0;
-  long predicted = 0;
-  for (size_t i = 0; i < predictions.size() && i < told.size(); ++i) {
-    if (predictions[i].is_null()) continue;
-    ++predicted;
-    if (told[i].is_null()) continue;  // a failed run: the classifier's business, not the fitness model's
-    const double y = told[i].get<double>(), p = predictions[i].at("fitness").get<double>();
-    errors.push_back(std::abs(p - y));
-    ys.push_back(y);
-    if (y >= predictions[i].at("low90").get<double>() && y <= predictions[i].at("high90").get<double>()) ++covered;
-  }
-  result.surrogate_batch = state.at("batch").get<int>();
-  result.surrogate_batch_reason = state.at("batch_reason").get<std::string>();
-  result.surrogate_predicted = predicted;
-  if (ys.size() < 2) return;
-  const double mean = std::accumulate(ys.begin(), ys.end(), 0.0) / static_cast<double>(ys.size());
-  double spread = 0;
-  for (double y : ys) spread += std::abs(y - mean);
-  if (spread > 0) result.surrogate_prequential_error = std::accumulate(errors.begin(), errors.end(), 0.0) / spread;
-  result.surrogate_prequential_coverage90 = static_cast<double>(covered) / static_cast<double>(ys.size());
 }
 
 // The result, from the archive: a resumed campaign reports exactly what an uninterrupted one would.
@@ -648,10 +615,18 @@ CampaignResult collect_result(const CampaignContext& ctx, const CampaignOptimise
       result.surrogate_screened_out += static_cast<long>(entry.at("candidates").size()) - entry.at("simulated").get<long>();
       result.surrogate_iterations.push_back(std::move(entry));
     }
-    const auto statistics_start = std::chrono::steady_clock::now();
+    const Stopwatch statistics_time;
     if (setup.bayes) {
       result.surrogate_simulated = result.candidates;
-      if (auto last = ctx.archive.last_iteration(ctx.campaign_id)) bayes_statistics(json::parse(last->optimiser_state), result);
+      if (auto last = ctx.archive.last_iteration(ctx.campaign_id)) {
+        const json saved = json::parse(last->optimiser_state);
+        const auto summary = surrogate::summarise_bayes_state(saved.contains("swarm") ? saved.at("swarm") : saved);
+        result.surrogate_batch = summary.batch;
+        result.surrogate_batch_reason = summary.batch_reason;
+        result.surrogate_predicted = summary.predicted;
+        result.surrogate_prequential_error = summary.prequential_error;
+        result.surrogate_prequential_coverage90 = summary.prequential_coverage90;
+      }
     }
     const auto rows = training_rows(config, setup, ctx.archive, ctx.campaign_id);
     if (setup.bayes && config.surrogate.options.kind == "mlp") {
@@ -662,7 +637,7 @@ CampaignResult collect_result(const CampaignContext& ctx, const CampaignOptimise
     } else if (surrogate::SurrogateModel final_model(config.surrogate.options); final_model.fit(rows)) {
       result.surrogate_cv_error = final_model.gp().leave_one_out().relative_error;
     }
-    result.model_time_s += seconds_since(statistics_start);
+    result.model_time_s += statistics_time.elapsed_s();
   }
   if (!std::isfinite(best)) {
     // the reason the most runs share, with the first case it was archived for

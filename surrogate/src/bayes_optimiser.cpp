@@ -193,14 +193,14 @@ class BayesOptimiser final : public optimise::Optimiser {
 
   // The model for the next proposal: a full refit when there is no model yet or the rows grew by
   // refit_growth since the last full one, else an update; recorded in the state. False: unusable.
-  bool refresh_model() {
+  bool refresh_model(const std::vector<TrainingRow>& rows) {
     long last_full = 0;
     for (const auto& [told, full] : fits_)
       if (full) last_full = told;
     const long told = static_cast<long>(told_x_.size());
     const double rows_now = static_cast<double>(warm_.size() + told_x_.size());
     const bool full = !model_.usable() || rows_now >= surrogate_.refit_growth * static_cast<double>(warm_.size() + last_full);
-    fits_.push_back({told, fit_model(rows_until(told_x_.size()), full)});
+    fits_.push_back({told, fit_model(rows, full)});
     return model_.usable();
   }
 
@@ -228,7 +228,8 @@ class BayesOptimiser final : public optimise::Optimiser {
     std::mt19937_64 rng(mix(mix(options_.seed) ^ static_cast<std::uint64_t>(iteration_ + 1)));
     Eigen::VectorXd random_point(d);
     for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
-    if (!refresh_model()) {
+    const auto rows = rows_until(told_x_.size());
+    if (!refresh_model(rows)) {
       for (long i = 0; i < count; ++i) {
         if (i > 0)
           for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
@@ -243,7 +244,6 @@ class BayesOptimiser final : public optimise::Optimiser {
       for (int k = 0; k < d; ++k) u[k] = uniform01(rng);
       searched.push_back(u);
     }
-    const auto rows = rows_until(told_x_.size());
     std::vector<size_t> order;
     for (size_t i = 0; i < rows.size(); ++i)
       if (std::isfinite(rows[i].fitness)) order.push_back(i);
@@ -339,6 +339,34 @@ class BayesOptimiser final : public optimise::Optimiser {
 };
 
 }  // namespace
+
+BayesSummary summarise_bayes_state(const nlohmann::json& state) {
+  BayesSummary summary;
+  std::vector<double> errors, observed;
+  long covered = 0;
+  try {
+    const auto& predictions = state.at("told_predictions");
+    const auto& told = state.at("told_f");
+    for (size_t i = 0; i < predictions.size() && i < told.size(); ++i) {
+      if (predictions[i].is_null()) continue;
+      ++summary.predicted;
+      if (told[i].is_null()) continue;  // a failed run: the classifier's business, not the fitness model's
+      const double y = told[i].get<double>();
+      errors.push_back(std::abs(predictions[i].at("fitness").get<double>() - y));
+      observed.push_back(y);
+      if (y >= predictions[i].at("low90").get<double>() && y <= predictions[i].at("high90").get<double>()) ++covered;
+    }
+    summary.batch = state.at("batch").get<int>();
+    summary.batch_reason = state.at("batch_reason").get<std::string>();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(std::string("bo state: ") + e.what());
+  }
+  if (observed.size() >= 2) {
+    summary.prequential_error = detail::relative_error(errors, observed);
+    summary.prequential_coverage90 = static_cast<double>(covered) / static_cast<double>(observed.size());
+  }
+  return summary;
+}
 
 std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
                                                           const optimise::OptimiserOptions& options,

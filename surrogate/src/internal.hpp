@@ -7,7 +7,9 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <cstdint>
+#include <numeric>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -38,6 +40,15 @@ inline std::uint64_t mix(std::uint64_t z) {
   z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
   z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
   return z ^ (z >> 31);
+}
+
+// Held-out relative error: mean |ŷ − y| / mean |y − mean(y)| from the absolute errors and the
+// observed values (0 when the values do not spread).
+inline double relative_error(const std::vector<double>& absolute_errors, const std::vector<double>& observed) {
+  const double mean = std::accumulate(observed.begin(), observed.end(), 0.0) / static_cast<double>(observed.size());
+  double spread = 0;
+  for (double y : observed) spread += std::abs(y - mean);
+  return spread > 0 ? std::accumulate(absolute_errors.begin(), absolute_errors.end(), 0.0) / spread : 0.0;
 }
 
 // Reads `json` key by key with set(options, key, value), which assigns one key and throws for an

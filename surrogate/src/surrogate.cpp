@@ -508,12 +508,8 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
     }
   }
   if (cv.finite_rows == 0) return cv;
-  const double mean_y = std::accumulate(ys.begin(), ys.end(), 0.0) / static_cast<double>(ys.size());
-  double spread = 0;
-  for (double y : ys) spread += std::abs(y - mean_y);
-  const double total = std::accumulate(abs_errors.begin(), abs_errors.end(), 0.0);
-  cv.mean_absolute_error = total / static_cast<double>(abs_errors.size());
-  cv.relative_error = spread > 0 ? total / spread : 0.0;
+  cv.mean_absolute_error = std::accumulate(abs_errors.begin(), abs_errors.end(), 0.0) / static_cast<double>(abs_errors.size());
+  cv.relative_error = detail::relative_error(abs_errors, ys);
   if (!rel_errors.empty()) {
     std::nth_element(rel_errors.begin(), rel_errors.begin() + static_cast<long>(rel_errors.size() / 2), rel_errors.end());
     cv.median_relative_error = rel_errors[rel_errors.size() / 2];

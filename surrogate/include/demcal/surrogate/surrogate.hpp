@@ -242,6 +242,20 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
 // the batch grows once per cost_ratio. Deterministic given the rows and that decision; save_state()
 // holds the told history, the model's predictions of each proposed point, the refits and the batch,
 // so load_state() replays the refits and continues exactly.
+// What a "bo" optimiser's saved state says of its run: points per round and why (the cost-aware
+// decision), points the model proposed, and the prequential check of their predictions, each made
+// before the point was simulated: relative error (mean |ŷ − y| / mean |y − ȳ|) and 90 % interval
+// coverage over those that ran (finite fitness; NaN with fewer than 2). Throws
+// std::invalid_argument for a state that is not a "bo" state.
+struct BayesSummary {
+  int batch = 0;
+  std::string batch_reason;
+  long predicted = 0;
+  double prequential_error = std::numeric_limits<double>::quiet_NaN();
+  double prequential_coverage90 = std::numeric_limits<double>::quiet_NaN();
+};
+BayesSummary summarise_bayes_state(const nlohmann::json& state);
+
 std::unique_ptr<optimise::Optimiser> make_bayes_optimiser(const optimise::ParameterSpace& space,
                                                           const optimise::OptimiserOptions& options,
                                                           const SurrogateOptions& surrogate,
