@@ -52,6 +52,7 @@ class ObjectReader {
   ObjectReader(const json& object, std::string path) : object_(object), path_(std::move(path)) {
     if (!object_.is_object()) throw SceneError(path_, "expected a JSON object");
   }
+  const std::string& path() const { return path_; }
   std::string key_path(const std::string& key) const { return path_ + "." + key; }
   bool has(const std::string& key) const { return object_.contains(key); }
   const json& required(const std::string& key) const {
@@ -161,27 +162,55 @@ int Scene::block_index(const std::string& block_name) const {
   return -1;
 }
 
-void Scene::Validate(const std::string& source) const {
-  const std::string s = source + ": ";
-  require_positive(width, s + "width");
-  require_finite(gravity.x(), s + "gravity[0]");
-  require_finite(gravity.y(), s + "gravity[1]");
-  if (blocks.empty()) throw SceneError(s + "blocks", "the scene has no blocks");
-  if (auto m = limits::check(limits::Limit::blocks, static_cast<double>(blocks.size())))
-    throw SceneError(s + "blocks", *m);
-  if (joint_groups.empty()) throw SceneError(s + "joint_groups", "at least one joint group is needed");
-  for (const auto& [group, material] : joint_groups) material.Validate(s + "joint_groups." + group);
-  if (!default_joint_group.empty() && !joint_groups.count(default_joint_group))
-    throw SceneError(s + "default_joint_group", "unknown joint group '" + default_joint_group + "'");
-  for (std::size_t r = 0; r < joint_group_rules.size(); ++r) {
-    const auto& rule = joint_group_rules[r];
+namespace {
+
+void validate_joint_groups(const Scene& scene, const std::string& s) {
+  if (scene.joint_groups.empty()) throw SceneError(s + "joint_groups", "at least one joint group is needed");
+  for (const auto& [group, material] : scene.joint_groups) material.Validate(s + "joint_groups." + group);
+  if (!scene.default_joint_group.empty() && !scene.joint_groups.count(scene.default_joint_group))
+    throw SceneError(s + "default_joint_group", "unknown joint group '" + scene.default_joint_group + "'");
+  for (std::size_t r = 0; r < scene.joint_group_rules.size(); ++r) {
+    const auto& rule = scene.joint_group_rules[r];
     const std::string where = s + "joint_group_rules[" + std::to_string(r) + "]";
-    if (!joint_groups.count(rule.joint_group))
+    if (!scene.joint_groups.count(rule.joint_group))
       throw SceneError(where + ".joint_group", "unknown joint group '" + rule.joint_group + "'");
     if (rule.orientation != "any" && rule.orientation != "horizontal" && rule.orientation != "vertical")
       throw SceneError(where + ".orientation", "must be any, horizontal or vertical, got '" + rule.orientation + "'");
   }
+}
 
+// A block's polygon: at least 3 finite vertices, counter-clockwise, convex, of non-zero area.
+void validate_block_polygon(const Block& b, const std::string& where) {
+  if (b.vertices.size() < 3) throw SceneError(where + ".vertices", "a block needs at least 3 vertices");
+  if (auto m = limits::check(limits::Limit::vertices_per_block, static_cast<double>(b.vertices.size())))
+    throw SceneError(where + ".vertices", *m);
+  for (std::size_t v = 0; v < b.vertices.size(); ++v) {
+    require_finite(b.vertices[v].x(), where + ".vertices[" + std::to_string(v) + "]");
+    require_finite(b.vertices[v].y(), where + ".vertices[" + std::to_string(v) + "]");
+  }
+  const double area = geometry::signed_area(b.vertices);
+  double extent = 0;
+  for (const Vec2& v : b.vertices) extent = std::max(extent, (v - b.vertices[0]).norm());
+  if (geometry::edges_self_intersect(b.vertices)) throw SceneError(where + ".vertices", "self-intersecting polygon");
+  if (std::abs(area) <= 1e-12 * std::max(extent * extent, 1e-30))
+    throw SceneError(where + ".vertices", "zero-area block");
+  if (area < 0) throw SceneError(where + ".vertices", "vertices must be counter-clockwise");
+  if (!geometry::is_convex_ccw(b.vertices)) throw SceneError(where + ".vertices", "the polygon is not convex");
+}
+
+// Support springs hold fixed blocks only; a rotational restraint, free blocks only.
+void validate_block_springs(const Block& b, const std::string& where) {
+  require_non_negative(b.support_kx, where + ".support_kx");
+  require_non_negative(b.support_ky, where + ".support_ky");
+  require_non_negative(b.support_kr, where + ".support_kr");
+  require_non_negative(b.beam_kr, where + ".beam_kr");
+  if (!b.fixed && (b.support_kx > 0 || b.support_ky > 0 || b.support_kr > 0))
+    throw SceneError(where, "support springs (support_kx, support_ky, support_kr) apply to fixed blocks only");
+  if (b.fixed && b.beam_kr > 0)
+    throw SceneError(where + ".beam_kr", "a rotational restraint applies to a free block, not a fixed one");
+}
+
+void validate_blocks(const std::vector<Block>& blocks, const std::string& s) {
   std::set<std::string> names;
   bool any_free = false;
   for (std::size_t i = 0; i < blocks.size(); ++i) {
@@ -190,34 +219,15 @@ void Scene::Validate(const std::string& source) const {
     if (b.name.empty()) throw SceneError(s + "blocks[" + std::to_string(i) + "].name", "a block needs a name");
     if (!names.insert(b.name).second) throw SceneError(where, "duplicate block name");
     require_positive(b.density, where + ".density");
-    if (b.vertices.size() < 3) throw SceneError(where + ".vertices", "a block needs at least 3 vertices");
-    if (auto m = limits::check(limits::Limit::vertices_per_block, static_cast<double>(b.vertices.size())))
-      throw SceneError(where + ".vertices", *m);
-    for (std::size_t v = 0; v < b.vertices.size(); ++v) {
-      require_finite(b.vertices[v].x(), where + ".vertices[" + std::to_string(v) + "]");
-      require_finite(b.vertices[v].y(), where + ".vertices[" + std::to_string(v) + "]");
-    }
-    const double area = geometry::signed_area(b.vertices);
-    double extent = 0;
-    for (const Vec2& v : b.vertices) extent = std::max(extent, (v - b.vertices[0]).norm());
-    if (geometry::edges_self_intersect(b.vertices)) throw SceneError(where + ".vertices", "self-intersecting polygon");
-    if (std::abs(area) <= 1e-12 * std::max(extent * extent, 1e-30))
-      throw SceneError(where + ".vertices", "zero-area block");
-    if (area < 0) throw SceneError(where + ".vertices", "vertices must be counter-clockwise");
-    if (!geometry::is_convex_ccw(b.vertices)) throw SceneError(where + ".vertices", "the polygon is not convex");
-    require_non_negative(b.support_kx, where + ".support_kx");
-    require_non_negative(b.support_ky, where + ".support_ky");
-    require_non_negative(b.support_kr, where + ".support_kr");
-    require_non_negative(b.beam_kr, where + ".beam_kr");
-    if (!b.fixed && (b.support_kx > 0 || b.support_ky > 0 || b.support_kr > 0))
-      throw SceneError(where, "support springs (support_kx, support_ky, support_kr) apply to fixed blocks only");
-    if (b.fixed && b.beam_kr > 0)
-      throw SceneError(where + ".beam_kr", "a rotational restraint applies to a free block, not a fixed one");
+    validate_block_polygon(b, where);
+    validate_block_springs(b, where);
     any_free = any_free || !b.fixed;
   }
   if (!any_free) throw SceneError(s + "blocks", "every block is fixed: nothing can move");
+}
 
-  // Blocks must not overlap at the start (touching is fine): tolerance 1e-9 of the block size.
+// Blocks must not overlap at the start (touching is fine): tolerance 1e-9 of the block size.
+void validate_no_overlap_at_start(const std::vector<Block>& blocks, const std::string& s) {
   for (std::size_t i = 0; i < blocks.size(); ++i)
     for (std::size_t j = i + 1; j < blocks.size(); ++j) {
       const double depth = geometry::overlap_depth(blocks[i].vertices, blocks[j].vertices);
@@ -225,26 +235,31 @@ void Scene::Validate(const std::string& source) const {
         throw SceneError(s + "blocks", "blocks '" + blocks[i].name + "' and '" + blocks[j].name +
                                            "' overlap at the start by " + format_value(depth) + " m");
     }
+}
 
-  if (joint_gap.on()) {
-    const std::string where = s + "joint_gap";
-    const auto slash = joint_gap.joint.find('/');
-    if (slash == std::string::npos || joint_gap.joint.find('/', slash + 1) != std::string::npos)
-      throw SceneError(where + ".joint", "expected two block names as 'blockA/blockB', got '" + joint_gap.joint + "'");
-    const int ia = block_index(joint_gap.joint.substr(0, slash)), ib = block_index(joint_gap.joint.substr(slash + 1));
-    if (ia < 0 || ib < 0 || ia == ib)
-      throw SceneError(where + ".joint", "'" + joint_gap.joint + "' does not name two different blocks of the scene");
-    Vec2 p, q;
-    if (!geometry::shared_edge(blocks[ia].vertices, blocks[ib].vertices, p, q))
-      throw SceneError(where + ".joint", "blocks of '" + joint_gap.joint + "' share no edge at the start");
-    require_at_most(joint_gap.opening, JointGap::kMaxOpening, where + ".opening", "m; a fit imperfection");
-    require_finite(joint_gap.taper, where + ".taper");
-    if (std::abs(joint_gap.taper) > JointGap::kMaxTaper)
-      throw SceneError(where + ".taper", "must be in [-" + format_value(JointGap::kMaxTaper) + ", " +
-                                             format_value(JointGap::kMaxTaper) + "] (beyond 1 it equals 1), got " +
-                                             format_value(joint_gap.taper));
-  }
+void validate_joint_gap(const Scene& scene, const std::string& s) {
+  const JointGap& joint_gap = scene.joint_gap;
+  if (!joint_gap.on()) return;
+  const std::string where = s + "joint_gap";
+  const auto slash = joint_gap.joint.find('/');
+  if (slash == std::string::npos || joint_gap.joint.find('/', slash + 1) != std::string::npos)
+    throw SceneError(where + ".joint", "expected two block names as 'blockA/blockB', got '" + joint_gap.joint + "'");
+  const int ia = scene.block_index(joint_gap.joint.substr(0, slash));
+  const int ib = scene.block_index(joint_gap.joint.substr(slash + 1));
+  if (ia < 0 || ib < 0 || ia == ib)
+    throw SceneError(where + ".joint", "'" + joint_gap.joint + "' does not name two different blocks of the scene");
+  Vec2 p, q;
+  if (!geometry::shared_edge(scene.blocks[ia].vertices, scene.blocks[ib].vertices, p, q))
+    throw SceneError(where + ".joint", "blocks of '" + joint_gap.joint + "' share no edge at the start");
+  require_at_most(joint_gap.opening, JointGap::kMaxOpening, where + ".opening", "m; a fit imperfection");
+  require_finite(joint_gap.taper, where + ".taper");
+  if (std::abs(joint_gap.taper) > JointGap::kMaxTaper)
+    throw SceneError(where + ".taper", "must be in [-" + format_value(JointGap::kMaxTaper) + ", " +
+                                           format_value(JointGap::kMaxTaper) + "] (beyond 1 it equals 1), got " +
+                                           format_value(joint_gap.taper));
+}
 
+void validate_contact(const ContactSettings& contact, const std::string& s) {
   const int n = contact.points_per_joint;
   if (n < 2 || n > 200)
     throw SceneError(s + "contact.points_per_joint", "must be between 2 and 200, got " + std::to_string(n));
@@ -252,7 +267,9 @@ void Scene::Validate(const std::string& source) const {
   if (contact.edge_angle_tolerance <= 0 || contact.edge_angle_tolerance >= std::numbers::pi / 4)
     throw SceneError(s + "contact.edge_angle_tolerance_deg", "must be in (0, 45) degrees");
   require_non_negative(contact.search_margin, s + "contact.search_margin");
+}
 
+void validate_solver(const SolverSettings& solver, const std::string& s) {
   require_finite(solver.local_damping, s + "solver.local_damping");
   if (solver.local_damping < 0 || solver.local_damping >= 1)
     throw SceneError(s + "solver.local_damping", "must be in [0, 1), got " + format_value(solver.local_damping));
@@ -270,13 +287,17 @@ void Scene::Validate(const std::string& source) const {
   require_positive(solver.max_time, s + "solver.max_time");
   require_positive(solver.collapse_displacement, s + "solver.collapse_displacement");
   require_positive(solver.max_velocity, s + "solver.max_velocity");
+}
 
-  const Loading& l = loading;
+// The driven load (point or wall) on a free block, then the constant forces.
+void validate_loading(const Scene& scene, const std::string& s) {
+  const Loading& l = scene.loading;
   if (l.type != "none" && l.type != "point" && l.type != "wall")
     throw SceneError(s + "loading.type", "must be none, point or wall, got '" + l.type + "'");
   if (l.type != "none") {
-    if (block_index(l.block) < 0) throw SceneError(s + "loading.block", "unknown block '" + l.block + "'");
-    if (blocks[block_index(l.block)].fixed) throw SceneError(s + "loading.block", "the loaded block '" + l.block + "' is fixed");
+    if (scene.block_index(l.block) < 0) throw SceneError(s + "loading.block", "unknown block '" + l.block + "'");
+    if (scene.blocks[scene.block_index(l.block)].fixed)
+      throw SceneError(s + "loading.block", "the loaded block '" + l.block + "' is fixed");
     require_finite(l.point.x(), s + "loading.point");
     require_finite(l.point.y(), s + "loading.point");
     require_unit(l.direction, s + "loading.direction");
@@ -290,22 +311,179 @@ void Scene::Validate(const std::string& source) const {
   }
   for (std::size_t f = 0; f < l.constant_forces.size(); ++f) {
     const std::string where = s + "loading.constant_forces[" + std::to_string(f) + "]";
-    if (block_index(l.constant_forces[f].block) < 0)
+    if (scene.block_index(l.constant_forces[f].block) < 0)
       throw SceneError(where + ".block", "unknown block '" + l.constant_forces[f].block + "'");
     require_finite(l.constant_forces[f].force.norm(), where + ".force");
     require_finite(l.constant_forces[f].point.norm(), where + ".point");
   }
+}
+
+void validate_gauges(const Scene& scene, const std::string& s) {
+  const std::vector<Gauge>& gauges = scene.gauges;
   std::set<std::string> gauge_names;
   for (std::size_t g = 0; g < gauges.size(); ++g) {
     const std::string where = s + "gauges[" + std::to_string(g) + "]";
     if (gauges[g].name.empty() || gauges[g].name == "time" || gauges[g].name == "force")
       throw SceneError(where + ".name", "a gauge needs a name other than 'time' and 'force'");
     if (!gauge_names.insert(gauges[g].name).second) throw SceneError(where + ".name", "duplicate gauge '" + gauges[g].name + "'");
-    if (block_index(gauges[g].block) < 0) throw SceneError(where + ".block", "unknown block '" + gauges[g].block + "'");
+    if (scene.block_index(gauges[g].block) < 0)
+      throw SceneError(where + ".block", "unknown block '" + gauges[g].block + "'");
     require_finite(gauges[g].point.norm(), where + ".point");
     require_unit(gauges[g].direction, where + ".direction");
   }
 }
+
+}  // namespace
+
+void Scene::Validate(const std::string& source) const {
+  const std::string s = source + ": ";
+  require_positive(width, s + "width");
+  require_finite(gravity.x(), s + "gravity[0]");
+  require_finite(gravity.y(), s + "gravity[1]");
+  if (blocks.empty()) throw SceneError(s + "blocks", "the scene has no blocks");
+  if (auto m = limits::check(limits::Limit::blocks, static_cast<double>(blocks.size())))
+    throw SceneError(s + "blocks", *m);
+  validate_joint_groups(*this, s);
+  validate_blocks(blocks, s);
+  validate_no_overlap_at_start(blocks, s);
+  validate_joint_gap(*this, s);
+  validate_contact(contact, s);
+  validate_solver(solver, s);
+  validate_loading(*this, s);
+  validate_gauges(*this, s);
+}
+
+namespace {
+
+JointMaterial read_joint_material(const ObjectReader& g) {
+  JointMaterial m;
+  m.normal_stiffness = g.number("kn");
+  m.shear_stiffness = g.number("ks");
+  m.friction_angle = g.number("friction_deg") * kDegree;
+  m.closure_max = g.number("closure_max", m.closure_max);
+  m.friction_residual = g.number("friction_residual_deg", m.friction_residual / kDegree) * kDegree;
+  m.friction_loss = g.number("friction_loss_deg", m.friction_loss / kDegree) * kDegree;
+  m.slip_softening = g.number("slip_softening", m.slip_softening);
+  m.cohesion = g.number("cohesion", m.cohesion);
+  m.tensile_strength = g.number("tensile_strength", m.tensile_strength);
+  m.compressive_strength = g.number("compressive_strength", m.compressive_strength);
+  m.crushing_softening = g.number("crushing_softening", m.crushing_softening);
+  return m;
+}
+
+void read_joint_groups(const json& groups, const std::string& where, Scene& scene) {
+  if (!groups.is_object() || groups.empty()) throw SceneError(where, "expected an object of joint groups");
+  for (const auto& [group, value] : groups.items())
+    scene.joint_groups[group] = read_joint_material(ObjectReader(value, where + "." + group));
+}
+
+void read_joint_group_rules(const json& rules, const std::string& where, Scene& scene) {
+  if (!rules.is_array()) throw SceneError(where, "expected an array");
+  for (std::size_t r = 0; r < rules.size(); ++r) {
+    const ObjectReader rr(rules[r], where + "[" + std::to_string(r) + "]");
+    const json& labels = rr.required("labels");
+    if (!labels.is_array() || labels.size() != 2)
+      throw SceneError(rr.key_path("labels"), "expected two block labels, got " + labels.dump());
+    scene.joint_group_rules.push_back({ObjectReader::to_string(labels[0], rr.key_path("labels[0]")),
+                                       ObjectReader::to_string(labels[1], rr.key_path("labels[1]")),
+                                       rr.string("orientation", "any"), rr.string("joint_group")});
+  }
+}
+
+Block read_block(const ObjectReader& b) {
+  Block block;
+  block.name = b.string("name");
+  block.label = b.string("label", "");
+  block.density = b.number("density", block.density);
+  block.fixed = b.boolean("fixed", false);
+  block.fixed_rotation = b.boolean("fixed_rotation", false);
+  block.gravity = b.boolean("gravity", true);
+  block.support_kx = b.number("support_kx", 0);
+  block.support_ky = b.number("support_ky", 0);
+  block.support_kr = b.number("support_kr", 0);
+  block.beam_kr = b.number("beam_kr", 0);
+  const json& vertices = b.required("vertices");
+  if (!vertices.is_array()) throw SceneError(b.key_path("vertices"), "expected an array of [x, y]");
+  if (auto m = limits::check(limits::Limit::vertices_per_block, static_cast<double>(vertices.size())))
+    throw SceneError(b.key_path("vertices"), *m);
+  for (std::size_t v = 0; v < vertices.size(); ++v)
+    block.vertices.push_back(ObjectReader::to_vec2(vertices[v], b.key_path("vertices[" + std::to_string(v) + "]")));
+  return block;
+}
+
+void read_blocks(const json& blocks, const std::string& where, Scene& scene) {
+  if (!blocks.is_array()) throw SceneError(where, "expected an array of blocks");
+  if (auto m = limits::check(limits::Limit::blocks, static_cast<double>(blocks.size()))) throw SceneError(where, *m);
+  for (std::size_t i = 0; i < blocks.size(); ++i)
+    scene.blocks.push_back(read_block(ObjectReader(blocks[i], where + "[" + std::to_string(i) + "]")));
+}
+
+void read_contact(const ObjectReader& c, ContactSettings& contact) {
+  contact.points_per_joint = c.integer("points_per_joint", contact.points_per_joint);
+  contact.edge_angle_tolerance = c.number("edge_angle_tolerance_deg", contact.edge_angle_tolerance / kDegree) * kDegree;
+  contact.search_margin = c.number("search_margin", contact.search_margin);
+}
+
+void read_solver(const ObjectReader& c, SolverSettings& sv) {
+  sv.local_damping = c.number("local_damping", sv.local_damping);
+  sv.time_step_safety = c.number("time_step_safety", sv.time_step_safety);
+  sv.time_step = c.number("time_step", sv.time_step);
+  sv.time_step_faces = c.string("time_step_faces", sv.time_step_faces);
+  sv.density_scaling = c.number("density_scaling", sv.density_scaling);
+  sv.equilibrium_ratio = c.number("equilibrium_ratio", sv.equilibrium_ratio);
+  sv.max_equilibrium_time = c.number("max_equilibrium_time", sv.max_equilibrium_time);
+  sv.max_time = c.number("max_time", sv.max_time);
+  sv.collapse_displacement = c.number("collapse_displacement", sv.collapse_displacement);
+  sv.max_velocity = c.number("max_velocity", sv.max_velocity);
+}
+
+void read_loading(const ObjectReader& c, Loading& l) {
+  l.type = c.string("type", l.type);
+  if (l.type != "none") {
+    l.block = c.string("block");
+    l.point = c.vec2("point");
+  }
+  l.direction = c.vec2("direction", l.direction);
+  l.velocity = c.number("velocity", l.velocity);
+  l.max_displacement = c.number("max_displacement", l.max_displacement);
+  l.stiffness = c.number("stiffness", l.stiffness);
+  l.compression_only = c.boolean("compression_only", l.compression_only);
+  l.record_interval = c.number("record_interval", l.record_interval);
+  if (c.has("constant_forces")) {
+    const json& forces = c.required("constant_forces");
+    if (!forces.is_array()) throw SceneError(c.key_path("constant_forces"), "expected an array");
+    for (std::size_t f = 0; f < forces.size(); ++f) {
+      const ObjectReader fr(forces[f], c.key_path("constant_forces[" + std::to_string(f) + "]"));
+      l.constant_forces.push_back({fr.string("block"), fr.vec2("force"), fr.vec2("point")});
+    }
+  }
+}
+
+void read_gauges(const json& gauges, const std::string& where, Scene& scene) {
+  if (!gauges.is_array()) throw SceneError(where, "expected an array");
+  for (std::size_t g = 0; g < gauges.size(); ++g) {
+    const ObjectReader gr(gauges[g], where + "[" + std::to_string(g) + "]");
+    scene.gauges.push_back({gr.string("name"), gr.string("block"), gr.vec2("point"), gr.vec2("direction", Vec2(1, 0))});
+  }
+}
+
+// A gap is given as its opening and taper, or as its intrados and extrados ends.
+void read_joint_gap(const ObjectReader& c, JointGap& gap) {
+  gap.joint = c.string("joint");
+  if (c.has("opening") || c.has("taper")) {
+    if (c.has("intrados") || c.has("extrados"))
+      throw SceneError(c.path(), "give the opening and taper or the intrados and extrados ends, not both");
+    gap.opening = c.number("opening", 0);
+    gap.taper = c.number("taper", 0);
+  } else {
+    const double intrados = c.number("intrados", 0), extrados = c.number("extrados", 0);
+    require_non_negative(intrados, c.key_path("intrados"));
+    require_non_negative(extrados, c.key_path("extrados"));
+    gap.set_ends(intrados, extrados);
+  }
+}
+
+}  // namespace
 
 Scene scene_from_json(const json& j, const std::string& source) {
   Scene scene;
@@ -314,133 +492,16 @@ Scene scene_from_json(const json& j, const std::string& source) {
   scene.name = root.string("name", scene.name);
   scene.width = root.number("width", scene.width);
   scene.gravity = root.vec2("gravity", scene.gravity);
-
-  const json& groups = root.required("joint_groups");
-  if (!groups.is_object() || groups.empty()) throw SceneError(at("joint_groups"), "expected an object of joint groups");
-  for (const auto& [group, value] : groups.items()) {
-    const ObjectReader g(value, at("joint_groups." + group));
-    JointMaterial m;
-    m.normal_stiffness = g.number("kn");
-    m.shear_stiffness = g.number("ks");
-    m.friction_angle = g.number("friction_deg") * kDegree;
-    m.closure_max = g.number("closure_max", m.closure_max);
-    m.friction_residual = g.number("friction_residual_deg", m.friction_residual / kDegree) * kDegree;
-    m.friction_loss = g.number("friction_loss_deg", m.friction_loss / kDegree) * kDegree;
-    m.slip_softening = g.number("slip_softening", m.slip_softening);
-    m.cohesion = g.number("cohesion", m.cohesion);
-    m.tensile_strength = g.number("tensile_strength", m.tensile_strength);
-    m.compressive_strength = g.number("compressive_strength", m.compressive_strength);
-    m.crushing_softening = g.number("crushing_softening", m.crushing_softening);
-    scene.joint_groups[group] = m;
-  }
+  read_joint_groups(root.required("joint_groups"), at("joint_groups"), scene);
   scene.default_joint_group = root.string("default_joint_group", scene.joint_groups.begin()->first);
-  if (root.has("joint_group_rules")) {
-    const json& rules = root.required("joint_group_rules");
-    if (!rules.is_array()) throw SceneError(at("joint_group_rules"), "expected an array");
-    for (std::size_t r = 0; r < rules.size(); ++r) {
-      const ObjectReader rr(rules[r], at("joint_group_rules[" + std::to_string(r) + "]"));
-      const json& labels = rr.required("labels");
-      if (!labels.is_array() || labels.size() != 2)
-        throw SceneError(rr.key_path("labels"), "expected two block labels, got " + labels.dump());
-      scene.joint_group_rules.push_back({ObjectReader::to_string(labels[0], rr.key_path("labels[0]")),
-                                         ObjectReader::to_string(labels[1], rr.key_path("labels[1]")),
-                                         rr.string("orientation", "any"), rr.string("joint_group")});
-    }
-  }
-
-  const json& blocks = root.required("blocks");
-  if (!blocks.is_array()) throw SceneError(at("blocks"), "expected an array of blocks");
-  if (auto m = limits::check(limits::Limit::blocks, static_cast<double>(blocks.size())))
-    throw SceneError(at("blocks"), *m);
-  for (std::size_t i = 0; i < blocks.size(); ++i) {
-    const ObjectReader b(blocks[i], at("blocks[" + std::to_string(i) + "]"));
-    Block block;
-    block.name = b.string("name");
-    block.label = b.string("label", "");
-    block.density = b.number("density", block.density);
-    block.fixed = b.boolean("fixed", false);
-    block.fixed_rotation = b.boolean("fixed_rotation", false);
-    block.gravity = b.boolean("gravity", true);
-    block.support_kx = b.number("support_kx", 0);
-    block.support_ky = b.number("support_ky", 0);
-    block.support_kr = b.number("support_kr", 0);
-    block.beam_kr = b.number("beam_kr", 0);
-    const json& vertices = b.required("vertices");
-    if (!vertices.is_array()) throw SceneError(b.key_path("vertices"), "expected an array of [x, y]");
-    if (auto m = limits::check(limits::Limit::vertices_per_block, static_cast<double>(vertices.size())))
-      throw SceneError(b.key_path("vertices"), *m);
-    for (std::size_t v = 0; v < vertices.size(); ++v)
-      block.vertices.push_back(ObjectReader::to_vec2(vertices[v], b.key_path("vertices[" + std::to_string(v) + "]")));
-    scene.blocks.push_back(std::move(block));
-  }
-
-  if (root.has("contact")) {
-    const ObjectReader c(root.required("contact"), at("contact"));
-    scene.contact.points_per_joint = c.integer("points_per_joint", scene.contact.points_per_joint);
-    scene.contact.edge_angle_tolerance =
-        c.number("edge_angle_tolerance_deg", scene.contact.edge_angle_tolerance / kDegree) * kDegree;
-    scene.contact.search_margin = c.number("search_margin", scene.contact.search_margin);
-  }
-  if (root.has("solver")) {
-    const ObjectReader c(root.required("solver"), at("solver"));
-    SolverSettings& sv = scene.solver;
-    sv.local_damping = c.number("local_damping", sv.local_damping);
-    sv.time_step_safety = c.number("time_step_safety", sv.time_step_safety);
-    sv.time_step = c.number("time_step", sv.time_step);
-    sv.time_step_faces = c.string("time_step_faces", sv.time_step_faces);
-    sv.density_scaling = c.number("density_scaling", sv.density_scaling);
-    sv.equilibrium_ratio = c.number("equilibrium_ratio", sv.equilibrium_ratio);
-    sv.max_equilibrium_time = c.number("max_equilibrium_time", sv.max_equilibrium_time);
-    sv.max_time = c.number("max_time", sv.max_time);
-    sv.collapse_displacement = c.number("collapse_displacement", sv.collapse_displacement);
-    sv.max_velocity = c.number("max_velocity", sv.max_velocity);
-  }
-  if (root.has("loading")) {
-    const ObjectReader c(root.required("loading"), at("loading"));
-    Loading& l = scene.loading;
-    l.type = c.string("type", l.type);
-    if (l.type != "none") {
-      l.block = c.string("block");
-      l.point = c.vec2("point");
-    }
-    l.direction = c.vec2("direction", l.direction);
-    l.velocity = c.number("velocity", l.velocity);
-    l.max_displacement = c.number("max_displacement", l.max_displacement);
-    l.stiffness = c.number("stiffness", l.stiffness);
-    l.compression_only = c.boolean("compression_only", l.compression_only);
-    l.record_interval = c.number("record_interval", l.record_interval);
-    if (c.has("constant_forces")) {
-      const json& forces = c.required("constant_forces");
-      if (!forces.is_array()) throw SceneError(c.key_path("constant_forces"), "expected an array");
-      for (std::size_t f = 0; f < forces.size(); ++f) {
-        const ObjectReader fr(forces[f], c.key_path("constant_forces[" + std::to_string(f) + "]"));
-        l.constant_forces.push_back({fr.string("block"), fr.vec2("force"), fr.vec2("point")});
-      }
-    }
-  }
-  if (root.has("gauges")) {
-    const json& gauges = root.required("gauges");
-    if (!gauges.is_array()) throw SceneError(at("gauges"), "expected an array");
-    for (std::size_t g = 0; g < gauges.size(); ++g) {
-      const ObjectReader gr(gauges[g], at("gauges[" + std::to_string(g) + "]"));
-      scene.gauges.push_back({gr.string("name"), gr.string("block"), gr.vec2("point"), gr.vec2("direction", Vec2(1, 0))});
-    }
-  }
-  if (root.has("joint_gap")) {
-    const ObjectReader c(root.required("joint_gap"), at("joint_gap"));
-    scene.joint_gap.joint = c.string("joint");
-    if (c.has("opening") || c.has("taper")) {
-      if (c.has("intrados") || c.has("extrados"))
-        throw SceneError(at("joint_gap"), "give the opening and taper or the intrados and extrados ends, not both");
-      scene.joint_gap.opening = c.number("opening", 0);
-      scene.joint_gap.taper = c.number("taper", 0);
-    } else {
-      const double intrados = c.number("intrados", 0), extrados = c.number("extrados", 0);
-      require_non_negative(intrados, at("joint_gap") + ".intrados");
-      require_non_negative(extrados, at("joint_gap") + ".extrados");
-      scene.joint_gap.set_ends(intrados, extrados);
-    }
-  }
+  if (root.has("joint_group_rules"))
+    read_joint_group_rules(root.required("joint_group_rules"), at("joint_group_rules"), scene);
+  read_blocks(root.required("blocks"), at("blocks"), scene);
+  if (root.has("contact")) read_contact(ObjectReader(root.required("contact"), at("contact")), scene.contact);
+  if (root.has("solver")) read_solver(ObjectReader(root.required("solver"), at("solver")), scene.solver);
+  if (root.has("loading")) read_loading(ObjectReader(root.required("loading"), at("loading")), scene.loading);
+  if (root.has("gauges")) read_gauges(root.required("gauges"), at("gauges"), scene);
+  if (root.has("joint_gap")) read_joint_gap(ObjectReader(root.required("joint_gap"), at("joint_gap")), scene.joint_gap);
   scene.Validate(source);
   return scene;
 }

@@ -324,115 +324,98 @@ bool read_message(int fd, Message* m) {
   return true;
 }
 
-}  // namespace
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
 
-ProcessResult run_process(const ProcessOptions& options) {
-  options.Validate();
-  ProcessResult result;
-  const auto start = std::chrono::steady_clock::now();
-  auto elapsed = [&] {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  };
+// The caller's descriptors of one run. lifeline: only this process holds its write end; closing
+// it (or dying) stops the run. report: the supervisor's messages.
+struct RunDescriptors {
+  int out_fd = -1, err_fd = -1;
+  int lifeline[2] = {-1, -1};
+  int report[2] = {-1, -1};
+};
 
-  // Everything the supervisor needs is prepared before fork: after it, only async-signal-safe calls.
-  std::vector<char*> argv;
-  for (const auto& word : options.argv) argv.push_back(const_cast<char*>(word.c_str()));
-  argv.push_back(nullptr);
-  const int out_fd = open_output(options.stdout_path);
-  const int err_fd = open_output(options.stderr_path);
-  if (out_fd < 0 || err_fd < 0) {
-    const std::string bad = out_fd < 0 ? options.stdout_path : options.stderr_path;
-    if (out_fd >= 0) ::close(out_fd);
-    if (err_fd >= 0) ::close(err_fd);
-    result.message = "cannot open " + bad + " for writing: " + std::strerror(errno);
-    return result;
+// Opens the program's output files and both pipes; on failure closes what it opened and returns
+// the message, else "".
+std::string open_run_descriptors(const ProcessOptions& options, RunDescriptors& d) {
+  d.out_fd = open_output(options.stdout_path);
+  d.err_fd = open_output(options.stderr_path);
+  if (d.out_fd < 0 || d.err_fd < 0) {
+    const std::string bad = d.out_fd < 0 ? options.stdout_path : options.stderr_path;
+    if (d.out_fd >= 0) ::close(d.out_fd);
+    if (d.err_fd >= 0) ::close(d.err_fd);
+    return "cannot open " + bad + " for writing: " + std::strerror(errno);
   }
-  // lifeline: only this process holds its write end; closing it (or dying) stops the run.
-  // report: the supervisor's messages.
-  int lifeline[2], report[2];
-  if (::pipe2(lifeline, O_CLOEXEC) != 0) {
-    ::close(out_fd);
-    ::close(err_fd);
-    result.message = std::string("pipe: ") + std::strerror(errno);
-    return result;
+  if (::pipe2(d.lifeline, O_CLOEXEC) != 0) {
+    ::close(d.out_fd);
+    ::close(d.err_fd);
+    return std::string("pipe: ") + std::strerror(errno);
   }
-  if (::pipe2(report, O_CLOEXEC) != 0) {
-    for (int fd : {out_fd, err_fd, lifeline[0], lifeline[1]}) ::close(fd);
-    result.message = std::string("pipe: ") + std::strerror(errno);
-    return result;
+  if (::pipe2(d.report, O_CLOEXEC) != 0) {
+    for (int fd : {d.out_fd, d.err_fd, d.lifeline[0], d.lifeline[1]}) ::close(fd);
+    return std::string("pipe: ") + std::strerror(errno);
   }
-  const char* workdir = options.working_directory.empty() ? nullptr : options.working_directory.c_str();
-  const ChildSetup setup{argv.data(), workdir, out_fd, err_fd, lifeline[0], report[1], options.max_file_bytes};
+  return "";
+}
 
-  const pid_t supervisor = ::fork();
-  if (supervisor < 0) {
-    result.message = std::string("fork: ") + std::strerror(errno);
-    for (int fd : {out_fd, err_fd, lifeline[0], lifeline[1], report[0], report[1]}) ::close(fd);
-    return result;
-  }
-  if (supervisor == 0) supervise(setup);
-  for (int fd : {out_fd, err_fd, lifeline[0], report[1]}) ::close(fd);
-
+// What the caller heard from the supervisor.
+struct SupervisorReport {
   pid_t program = 0;
   int leftovers = 0;
-  bool stop_requested = false, cancelled = false;
+  bool cancelled = false;
+  bool final_message = false;  // false: the supervisor died or hung without a final word
+  Message last{0, 0};
+};
+
+// Reads the supervisor's messages until its final one; on timeout or cancel closes the lifeline
+// (set to -1 then) and gives the supervisor 30 s to answer.
+SupervisorReport await_supervisor(const ProcessOptions& options, int report_fd, int& lifeline_write,
+                                  std::chrono::steady_clock::time_point start) {
+  SupervisorReport heard;
+  bool stop_requested = false;
   double stop_requested_at = 0;
-  Message m{0, 0};
-  bool final_message = false;
-  while (!final_message) {
+  while (!heard.final_message) {
     if (!stop_requested) {
-      cancelled = options.cancel && options.cancel->load();
-      const bool timed_out = options.timeout_s > 0 && elapsed() >= options.timeout_s;
-      if (cancelled || timed_out) {
+      heard.cancelled = options.cancel && options.cancel->load();
+      const bool timed_out = options.timeout_s > 0 && seconds_since(start) >= options.timeout_s;
+      if (heard.cancelled || timed_out) {
         stop_requested = true;
-        stop_requested_at = elapsed();
-        ::close(lifeline[1]);
-        lifeline[1] = -1;
+        stop_requested_at = seconds_since(start);
+        ::close(lifeline_write);
+        lifeline_write = -1;
       }
-    } else if (elapsed() - stop_requested_at > 30) {
-      break;  // the supervisor does not answer: killed below
+    } else if (seconds_since(start) - stop_requested_at > 30) {
+      break;  // the supervisor does not answer: killed by the caller
     }
-    pollfd watch{report[0], POLLIN, 0};
+    pollfd watch{report_fd, POLLIN, 0};
     const int ready = ::poll(&watch, 1, 10);
     if (ready < 0 && errno != EINTR) break;
     if (ready <= 0) continue;
-    if (!read_message(report[0], &m)) break;  // the supervisor died without a final word
-    if (m.kind == kStarted) program = m.value;
-    else if (m.kind == kLeftovers) leftovers = m.value;
-    else final_message = true;
+    if (!read_message(report_fd, &heard.last)) break;  // the supervisor died without a final word
+    if (heard.last.kind == kStarted) heard.program = heard.last.value;
+    else if (heard.last.kind == kLeftovers) heard.leftovers = heard.last.value;
+    else heard.final_message = true;
   }
-  if (lifeline[1] >= 0) ::close(lifeline[1]);
-  ::close(report[0]);
-  if (!final_message) {
-    // Last resort (the supervisor itself was killed or hangs): kill what can still be reached.
-    ::kill(supervisor, SIGKILL);
-    if (program > 0) ::kill(-program, SIGKILL);
-  }
-  int supervisor_status = 0;
-  while (::waitpid(supervisor, &supervisor_status, 0) < 0 && errno == EINTR) {
-  }
-  result.wall_time_s = elapsed();
-  result.leftover_processes = leftovers;
+  return heard;
+}
 
-  if (!final_message) {
-    result.status = ProcessStatus::signalled;
-    result.signal = WIFSIGNALED(supervisor_status) ? WTERMSIG(supervisor_status) : 0;
-    result.message = "the process supervisor ended unexpectedly";
-    return result;
-  }
+// Fills in the status and message from the supervisor's final word (kExecFailed, kKilled or kExited).
+void describe_outcome(const ProcessOptions& options, const SupervisorReport& heard, ProcessResult& result) {
+  const Message& m = heard.last;
   if (m.kind == kExecFailed) {
     result.status = ProcessStatus::failed_to_start;
     result.message = "cannot run '" + options.argv[0] + "'" +
-                     (workdir ? " in " + options.working_directory : std::string()) + ": " +
-                     std::strerror(m.value);
-    return result;
+                     (!options.working_directory.empty() ? " in " + options.working_directory : std::string()) +
+                     ": " + std::strerror(m.value);
+    return;
   }
   if (m.kind == kKilled) {
-    result.status = cancelled ? ProcessStatus::cancelled : ProcessStatus::timed_out;
+    result.status = heard.cancelled ? ProcessStatus::cancelled : ProcessStatus::timed_out;
     char buffer[96];
     std::snprintf(buffer, sizeof buffer, "killed after the %g s timeout", options.timeout_s);
-    result.message = cancelled ? "killed: campaign cancelled" : buffer;
-    return result;
+    result.message = heard.cancelled ? "killed: campaign cancelled" : buffer;
+    return;
   }
   const int wait_status = m.value;
   if (WIFEXITED(wait_status)) {
@@ -445,6 +428,55 @@ ProcessResult run_process(const ProcessOptions& options) {
     result.message = std::string("killed by signal ") + std::to_string(result.signal) + " (" +
                      ::strsignal(result.signal) + ")";
   }
+}
+
+}  // namespace
+
+ProcessResult run_process(const ProcessOptions& options) {
+  options.Validate();
+  ProcessResult result;
+  const auto start = std::chrono::steady_clock::now();
+
+  // Everything the supervisor needs is prepared before fork: after it, only async-signal-safe calls.
+  std::vector<char*> argv;
+  for (const auto& word : options.argv) argv.push_back(const_cast<char*>(word.c_str()));
+  argv.push_back(nullptr);
+  RunDescriptors d;
+  result.message = open_run_descriptors(options, d);
+  if (!result.message.empty()) return result;
+  const char* workdir = options.working_directory.empty() ? nullptr : options.working_directory.c_str();
+  const ChildSetup setup{argv.data(), workdir, d.out_fd, d.err_fd, d.lifeline[0], d.report[1], options.max_file_bytes};
+
+  const pid_t supervisor = ::fork();
+  if (supervisor < 0) {
+    result.message = std::string("fork: ") + std::strerror(errno);
+    for (int fd : {d.out_fd, d.err_fd, d.lifeline[0], d.lifeline[1], d.report[0], d.report[1]}) ::close(fd);
+    return result;
+  }
+  if (supervisor == 0) supervise(setup);
+  for (int fd : {d.out_fd, d.err_fd, d.lifeline[0], d.report[1]}) ::close(fd);
+
+  const SupervisorReport heard = await_supervisor(options, d.report[0], d.lifeline[1], start);
+  if (d.lifeline[1] >= 0) ::close(d.lifeline[1]);
+  ::close(d.report[0]);
+  if (!heard.final_message) {
+    // Last resort (the supervisor itself was killed or hangs): kill what can still be reached.
+    ::kill(supervisor, SIGKILL);
+    if (heard.program > 0) ::kill(-heard.program, SIGKILL);
+  }
+  int supervisor_status = 0;
+  while (::waitpid(supervisor, &supervisor_status, 0) < 0 && errno == EINTR) {
+  }
+  result.wall_time_s = seconds_since(start);
+  result.leftover_processes = heard.leftovers;
+
+  if (!heard.final_message) {
+    result.status = ProcessStatus::signalled;
+    result.signal = WIFSIGNALED(supervisor_status) ? WTERMSIG(supervisor_status) : 0;
+    result.message = "the process supervisor ended unexpectedly";
+    return result;
+  }
+  describe_outcome(options, heard, result);
   return result;
 }
 

@@ -293,26 +293,28 @@ Figure failure_figure(const ReportInputs& in, size_t k, const std::string& out_d
   return f;
 }
 
-}  // namespace
-
-std::string write_report(const ReportInputs& in, const std::string& out_dir) {
+void write_summary(std::ostream& md, const ReportInputs& in) {
   const auto& config = *in.config;
   const auto& result = *in.result;
-  fs::create_directories(fs::path(out_dir) / "figures");
-  std::ostringstream md;
   md << "# Calibration report: " << config.name << "\n\n";
   md << "demcal " << version() << "; algorithm " << config.optimiser.algorithm << ", population "
      << config.optimiser.population << ", seed " << config.optimiser.seed << ", objective " << config.objective
      << "; " << result.iterations << " iterations, " << result.simulations << " simulations (" << result.failed_runs
      << " candidates without a finite fitness: a failed run, or a curve with no displacement window in common with "
         "the measurement, which ranks worst); optimiser status " << result.optimiser_status << ".\n\n";
+}
 
+void write_best_parameters(std::ostream& md, const ReportInputs& in) {
+  const auto& result = *in.result;
   md << "## Best parameters\n\n| parameter | value |\n| --- | --- |\n";
   for (const auto& [name, value] : result.best.params) md << "| " << name << " | " << fmt(value) << " |\n";
   md << "| fitness | " << fmt(result.best.fitness) << " |\n\n";
   md << "Units: kn, ks in Pa/m, friction_deg in degrees; fitness in N (sum over channels of the root of the "
-        "summed squared force differences at " << config.objective_options.points << " points).\n\n";
+        "summed squared force differences at " << in.config->objective_options.points << " points).\n\n";
+}
 
+void write_best_fits(std::ostream& md, const ReportInputs& in, const std::string& out_dir) {
+  const auto& config = *in.config;
   md << "## Best fit against the measured curves\n\n";
   for (size_t k = 0; k < config.cases.size() && k < in.best_runs.size(); ++k) {
     md << "Case **" << config.cases[k].name << "** (" << config.cases[k].measured.file << "): best run status "
@@ -327,9 +329,12 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
     }
     for (const auto& channel : channels) md << figure_markdown(fit_figure(in, k, channel, "figures", out_dir));
   }
+}
 
-  md << "## Convergence\n\n" << figure_markdown(convergence_figure(in, out_dir));
-
+// The layout of the paper's Tables 1-4.
+void write_five_best(std::ostream& md, const ReportInputs& in) {
+  const auto& config = *in.config;
+  const auto& result = *in.result;
   md << "## Five best parameter sets\n\nLayout of the paper's Tables 1-4 (one row per distinct set, best first).\n\n";
   md << "| Calibration process | Number of iterations | Run ID |";
   const auto free = config.space.free_names();
@@ -343,9 +348,10 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
     for (const auto& name : free) md << " " << table_value(name, result.top[i].params.at(name)) << " |";
     md << " " << fmt(result.top[i].fitness, "%.1f") << " |\n";
   }
-  md << "\n## Calibrated sets in parameter space\n\n";
-  for (const auto& f : parameter_space_figures(in, out_dir)) md << figure_markdown(f);
+}
 
+void write_failure_modes(std::ostream& md, const ReportInputs& in, const std::string& out_dir) {
+  const auto& config = *in.config;
   md << "## Failure mode\n\n";
   for (size_t k = 0; k < config.cases.size() && k < in.best_runs.size(); ++k) {
     const json& d = in.best_runs[k].details;
@@ -354,68 +360,105 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
          << d.value("sliding_joints", json::array()).dump() << ".\n\n";
     md << figure_markdown(failure_figure(in, k, out_dir));
   }
-  if (!in.failures.empty()) {
-    constexpr size_t kListed = 100;
-    md << "## Failed runs\n\n" << in.failures.size()
-       << " run(s) left their candidate without a finite fitness; the optimiser ranked those candidates worst "
-          "and went on.";
-    if (in.failures.size() > kListed) md << " The first " << kListed << " are listed.";
-    md << "\n\n| iteration | candidate | case | parameters | status | reason |\n| --- | --- | --- | --- | --- | --- |\n";
-    for (size_t i = 0; i < in.failures.size() && i < kListed; ++i) {
-      const auto& f = in.failures[i];
-      std::string params, reason = f.reason;
-      for (const auto& [name, value] : f.params) params += (params.empty() ? "" : ", ") + name + " " + fmt(value);
-      for (auto& c : reason)
-        if (c == '|' || c == '\n') c = '/';
-      md << "| " << f.iteration << " | " << f.position << " | " << f.case_name << " | " << params << " | " << f.status
-         << " | " << reason << " |\n";
-    }
-    md << "\n";
+}
+
+void write_failed_runs(std::ostream& md, const std::vector<ReportInputs::Failure>& failures) {
+  if (failures.empty()) return;
+  constexpr size_t kListed = 100;
+  md << "## Failed runs\n\n" << failures.size()
+     << " run(s) left their candidate without a finite fitness; the optimiser ranked those candidates worst "
+        "and went on.";
+  if (failures.size() > kListed) md << " The first " << kListed << " are listed.";
+  md << "\n\n| iteration | candidate | case | parameters | status | reason |\n| --- | --- | --- | --- | --- | --- |\n";
+  for (size_t i = 0; i < failures.size() && i < kListed; ++i) {
+    const auto& f = failures[i];
+    std::string params, reason = f.reason;
+    for (const auto& [name, value] : f.params) params += (params.empty() ? "" : ", ") + name + " " + fmt(value);
+    for (auto& c : reason)
+      if (c == '|' || c == '\n') c = '/';
+    md << "| " << f.iteration << " | " << f.position << " | " << f.case_name << " | " << params << " | " << f.status
+       << " | " << reason << " |\n";
   }
-  if (result.surrogate_used) {
-    md << "## Surrogate\n\n";
-    const long proposed = result.surrogate_simulated + result.surrogate_screened_out;
-    const bool mlp = result.surrogate_kind == "mlp";
-    md << "Model: " << result.surrogate_kind
-       << (mlp ? " (an ensemble of " + std::to_string(config.surrogate.options.mlp.members) +
-                     " neural networks predicting the curves, scored by the campaign's objective)"
-               : std::string(" (Gaussian process on the fitness, ARD Matern-5/2, fitted nugget)"))
-       << "; acquisition " << surrogate::to_string(config.surrogate.options.acquisition) << ". "
-       << (mlp ? "5-fold" : "Leave-one-out") << " relative error of the final model: "
-       << (std::isfinite(result.surrogate_cv_error) ? fmt(result.surrogate_cv_error, "%.3f") : std::string("n/a"))
-       << " (0 = exact, 1 = no better than the mean).\n\n";
-    if (config.optimiser.algorithm == "bo") {
-      md << "Bayesian optimisation: every candidate after the initial design was the acquisition's optimum; "
-         << result.candidates << " simulations.\n\n";
-    } else {
-      md << "Simulations saved: " << result.surrogate_screened_out << " of the " << proposed
-         << " candidates the optimiser proposed in screened iterations were screened out (never simulated); "
-         << result.surrogate_screened << " pool points were ranked.\n\n";
-      md << "| iteration | training runs | pool | simulated | model error on the simulated (mean relative) |\n"
-            "| --- | --- | --- | --- | --- |\n";
-      for (const auto& it : result.surrogate_iterations) {
-        md << "| " << it.at("iteration").get<int>() + 1 << " | " << it.value("training_rows", 0L) << " | "
-           << it.at("pool").get<long>() << " | " << it.at("simulated").get<long>() << " | "
-           << (it.at("mean_relative_error").is_number() ? fmt(it.at("mean_relative_error").get<double>(), "%.3f")
-                                                        : std::string("n/a"))
-           << " |\n";
-      }
-      md << "\nScreened out (predicted fitness and probability of failure):\n\n"
-            "| iteration | slot | parameters | predicted fitness | P(failure) |\n| --- | --- | --- | --- | --- |\n";
-      const auto free = config.space.free_names();
-      for (const auto& it : result.surrogate_iterations)
-        for (const auto& c : it.at("candidates")) {
-          if (c.at("simulated").get<bool>()) continue;
-          md << "| " << it.at("iteration").get<int>() + 1 << " | " << c.at("slot").get<int>() << " | ";
-          const auto x = c.at("x").get<std::vector<double>>();
-          for (size_t k = 0; k < free.size() && k < x.size(); ++k)
-            md << (k ? ", " : "") << free[k] << " " << table_value(free[k], x[k]);
-          md << " | " << fmt(c.at("predicted_fitness").get<double>(), "%.1f") << " | "
-             << fmt(c.at("failure_probability").get<double>(), "%.2f") << " |\n";
-        }
-      md << "\n";
-    }
+  md << "\n";
+}
+
+void write_surrogate_model(std::ostream& md, const ReportInputs& in) {
+  const auto& config = *in.config;
+  const auto& result = *in.result;
+  const bool mlp = result.surrogate_kind == "mlp";
+  md << "Model: " << result.surrogate_kind
+     << (mlp ? " (an ensemble of " + std::to_string(config.surrogate.options.mlp.members) +
+                   " neural networks predicting the curves, scored by the campaign's objective)"
+             : std::string(" (Gaussian process on the fitness, ARD Matern-5/2, fitted nugget)"))
+     << "; acquisition " << surrogate::to_string(config.surrogate.options.acquisition) << ". "
+     << (mlp ? "5-fold" : "Leave-one-out") << " relative error of the final model: "
+     << (std::isfinite(result.surrogate_cv_error) ? fmt(result.surrogate_cv_error, "%.3f") : std::string("n/a"))
+     << " (0 = exact, 1 = no better than the mean).\n\n";
+}
+
+// Per screened iteration: how many runs trained the model, how many were proposed and simulated.
+void write_screened_iterations(std::ostream& md, const CampaignResult& result) {
+  md << "| iteration | training runs | pool | simulated | model error on the simulated (mean relative) |\n"
+        "| --- | --- | --- | --- | --- |\n";
+  for (const auto& it : result.surrogate_iterations) {
+    md << "| " << it.at("iteration").get<int>() + 1 << " | " << it.value("training_rows", 0L) << " | "
+       << it.at("pool").get<long>() << " | " << it.at("simulated").get<long>() << " | "
+       << (it.at("mean_relative_error").is_number() ? fmt(it.at("mean_relative_error").get<double>(), "%.3f")
+                                                    : std::string("n/a"))
+       << " |\n";
   }
+}
+
+void write_screened_out_candidates(std::ostream& md, const ReportInputs& in) {
+  md << "\nScreened out (predicted fitness and probability of failure):\n\n"
+        "| iteration | slot | parameters | predicted fitness | P(failure) |\n| --- | --- | --- | --- | --- |\n";
+  const auto free = in.config->space.free_names();
+  for (const auto& it : in.result->surrogate_iterations)
+    for (const auto& c : it.at("candidates")) {
+      if (c.at("simulated").get<bool>()) continue;
+      md << "| " << it.at("iteration").get<int>() + 1 << " | " << c.at("slot").get<int>() << " | ";
+      const auto x = c.at("x").get<std::vector<double>>();
+      for (size_t k = 0; k < free.size() && k < x.size(); ++k)
+        md << (k ? ", " : "") << free[k] << " " << table_value(free[k], x[k]);
+      md << " | " << fmt(c.at("predicted_fitness").get<double>(), "%.1f") << " | "
+         << fmt(c.at("failure_probability").get<double>(), "%.2f") << " |\n";
+    }
+  md << "\n";
+}
+
+void write_surrogate(std::ostream& md, const ReportInputs& in) {
+  const auto& result = *in.result;
+  if (!result.surrogate_used) return;
+  md << "## Surrogate\n\n";
+  write_surrogate_model(md, in);
+  if (in.config->optimiser.algorithm == "bo") {
+    md << "Bayesian optimisation: every candidate after the initial design was the acquisition's optimum; "
+       << result.candidates << " simulations.\n\n";
+    return;
+  }
+  const long proposed = result.surrogate_simulated + result.surrogate_screened_out;
+  md << "Simulations saved: " << result.surrogate_screened_out << " of the " << proposed
+     << " candidates the optimiser proposed in screened iterations were screened out (never simulated); "
+     << result.surrogate_screened << " pool points were ranked.\n\n";
+  write_screened_iterations(md, result);
+  write_screened_out_candidates(md, in);
+}
+
+}  // namespace
+
+std::string write_report(const ReportInputs& in, const std::string& out_dir) {
+  fs::create_directories(fs::path(out_dir) / "figures");
+  std::ostringstream md;
+  write_summary(md, in);
+  write_best_parameters(md, in);
+  write_best_fits(md, in, out_dir);
+  md << "## Convergence\n\n" << figure_markdown(convergence_figure(in, out_dir));
+  write_five_best(md, in);
+  md << "\n## Calibrated sets in parameter space\n\n";
+  for (const auto& f : parameter_space_figures(in, out_dir)) md << figure_markdown(f);
+  write_failure_modes(md, in, out_dir);
+  write_failed_runs(md, in.failures);
+  write_surrogate(md, in);
 
   const std::string path = (fs::path(out_dir) / "report.md").string();
   std::ofstream out(path);

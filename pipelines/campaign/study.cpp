@@ -212,17 +212,38 @@ StudyConfig load_study(const std::string& path) {
 
 namespace {
 
-void write_markdown(const StudyConfig& config, const StudyResult& result) {
-  const auto& free = config.campaign.space.free_parameters();
-  const size_t cases = config.campaign.cases.size();
-  std::ostringstream md;
+using optimise::ParameterSpec;
+
+void write_study_summary(std::ostream& md, const StudyConfig& config) {
   md << "# Study: " << config.campaign.name << "\n\n"
      << config.methods.size() << " methods x " << config.seeds.size() << " seeds (";
   for (size_t i = 0; i < config.seeds.size(); ++i) md << (i ? ", " : "") << config.seeds[i];
   md << "), objective " << config.campaign.objective << ", population " << config.campaign.optimiser.population
-     << ", " << cases << " case(s) per candidate. Every campaign's result is in `<method>/seed-<seed>/result.json`.\n";
+     << ", " << config.campaign.cases.size()
+     << " case(s) per candidate. Every campaign's result is in `<method>/seed-<seed>/result.json`.\n";
+}
 
-  // The paper's Tables 1-4: per method, the five best of the per-seed best sets.
+// One row of the five-best table: the method's per-seed best set ranked `rank` (0 = best).
+void write_five_best_row(std::ostream& md, const StudyConfig& config, const StudyMethodResult& r, size_t rank) {
+  const auto& free = config.campaign.space.free_parameters();
+  const StudyCampaign& c = r.campaigns[r.five_best[rank]];
+  md << "| " << (rank == 0 ? r.method.label : "") << " | " << (rank == 0 ? std::to_string(r.method.iterations) : "")
+     << " | " << rank + 1 << " |";
+  for (const auto& p : free) {
+    const char* pattern = is_stiffness(p.name) ? "%.3g" : "%.2f";
+    md << " " << (c.best.params.count(p.name) ? format(pattern, display_value(p.name, c.best.params.at(p.name))) : "-")
+       << " |";
+  }
+  const auto hit = std::find(c.best_history.begin(), c.best_history.end(), c.best.fitness);
+  const long found = static_cast<long>(hit - c.best_history.begin()) + 1;
+  const long cases = static_cast<long>(config.campaign.cases.size());
+  md << " " << format("%.1f", c.best.fitness) << " | " << c.seed << " | "
+     << (std::isfinite(c.best.fitness) ? std::to_string(found * cases) : "-") << " |\n";
+}
+
+// The paper's Tables 1-4: per method, the five best of the per-seed best sets.
+void write_five_best(std::ostream& md, const StudyConfig& config, const StudyResult& result) {
+  const auto& free = config.campaign.space.free_parameters();
   md << "\n## Five best solution sets per method\n\nThe best set of each seed's campaign; the five best of them per "
         "method (Run ID = rank).\n\n| Calibration process | Number of iterations | Run ID |";
   for (const auto& p : free) md << " " << header_of(p.name) << " |";
@@ -230,35 +251,29 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
   for (size_t i = 0; i < free.size(); ++i) md << "---|";
   md << "---|---|---|\n";
   for (const auto& r : result.methods)
-    for (size_t rank = 0; rank < r.five_best.size(); ++rank) {
-      const StudyCampaign& c = r.campaigns[r.five_best[rank]];
-      md << "| " << (rank == 0 ? r.method.label : "") << " | " << (rank == 0 ? std::to_string(r.method.iterations) : "")
-         << " | " << rank + 1 << " |";
-      for (const auto& p : free)
-        md << " " << (c.best.params.count(p.name) ? format(is_stiffness(p.name) ? "%.3g" : "%.2f", display_value(p.name, c.best.params.at(p.name))) : "-")
-           << " |";
-      const auto hit = std::find(c.best_history.begin(), c.best_history.end(), c.best.fitness);
-      const long found = static_cast<long>(hit - c.best_history.begin()) + 1;
-      md << " " << format("%.1f", c.best.fitness) << " | " << c.seed << " | "
-         << (std::isfinite(c.best.fitness) ? std::to_string(found * static_cast<long>(cases)) : "-") << " |\n";
-    }
+    for (size_t rank = 0; rank < r.five_best.size(); ++rank) write_five_best_row(md, config, r, rank);
+}
 
+// "mean | std | median | min | max" of a table row.
+std::string statistics_cells(const FitnessStatistics& s) {
+  return format("%.1f", s.mean) + " | " + format("%.1f", s.stddev) + " | " + format("%.1f", s.median) + " | " +
+         format("%.1f", s.min) + " | " + format("%.1f", s.max);
+}
+
+void write_fitness_tables(std::ostream& md, const StudyResult& result) {
   md << "\n## Fitness of the best set per seed\n\n| method | iterations | seeds with a result | mean | std | median | min | max |\n"
      << "|---|---|---|---|---|---|---|---|\n";
-  for (const auto& r : result.methods) {
-    const auto& s = r.fitness;
-    md << "| " << r.method.label << " | " << r.method.iterations << " | " << s.count << "/" << r.campaigns.size() << " | "
-       << format("%.1f", s.mean) << " | " << format("%.1f", s.stddev) << " | " << format("%.1f", s.median) << " | "
-       << format("%.1f", s.min) << " | " << format("%.1f", s.max) << " |\n";
-  }
+  for (const auto& r : result.methods)
+    md << "| " << r.method.label << " | " << r.method.iterations << " | " << r.fitness.count << "/"
+       << r.campaigns.size() << " | " << statistics_cells(r.fitness) << " |\n";
   md << "\n## At equal cost: best fitness after " << result.common_budget
      << " simulations\n\nThe per-seed best after the fewest simulations any method used, so that methods with "
         "larger budgets are compared at the same cost.\n\n| method | mean | std | median | min | max |\n|---|---|---|---|---|---|\n";
-  for (const auto& r : result.methods) {
-    const auto& s = r.fitness_at_common_budget;
-    md << "| " << r.method.label << " | " << format("%.1f", s.mean) << " | " << format("%.1f", s.stddev) << " | "
-       << format("%.1f", s.median) << " | " << format("%.1f", s.min) << " | " << format("%.1f", s.max) << " |\n";
-  }
+  for (const auto& r : result.methods)
+    md << "| " << r.method.label << " | " << statistics_cells(r.fitness_at_common_budget) << " |\n";
+}
+
+void write_simulations_used(std::ostream& md, const StudyResult& result) {
   md << "\n## Simulations used\n\n| method | per campaign | all seeds | simulated in this session (rest read from the "
         "archive) | wall time this session (s) |\n|---|---|---|---|---|\n";
   for (const auto& r : result.methods) {
@@ -267,6 +282,9 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
     md << "| " << r.method.label << " | " << r.simulations_per_campaign << " | " << r.simulations_total << " | "
        << simulated << " | " << format("%.1f", r.wall_time_s) << " |\n";
   }
+}
+
+void write_failed_campaigns(std::ostream& md, const StudyResult& result) {
   bool any_failed = false;
   for (const auto& r : result.methods)
     for (const auto& c : r.campaigns)
@@ -275,27 +293,33 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
         any_failed = true;
         md << "- " << r.method.label << " seed " << c.seed << ": " << c.message << "\n";
       }
+}
 
-  // Figures: mean best-so-far against simulations; the per-seed best sets in parameter space.
-  fs::create_directories(fs::path(config.output) / "figures");
+// Gnuplot datablock $c<m>: the best fitness so far, mean over the method's seeds, against
+// simulations. `positive` turns false where a mean is not above 0 (no log scale then).
+std::string mean_best_datablock(const StudyMethodResult& r, size_t m, size_t cases, bool& positive) {
+  size_t n = 0;
+  for (const auto& c : r.campaigns) n = std::max(n, c.best_history.size());
+  std::string block = "$c" + std::to_string(m) + " << EOD\n";
+  for (size_t i = 0; i < n; ++i) {
+    double sum = 0;
+    int count = 0;
+    for (const auto& c : r.campaigns)
+      if (i < c.best_history.size() && std::isfinite(c.best_history[i])) sum += c.best_history[i], ++count;
+    if (count == 0) continue;
+    if (sum <= 0) positive = false;
+    block += std::to_string((i + 1) * cases) + " " + format("%.10g", sum / count) + "\n";
+  }
+  return block + "EOD\n";
+}
+
+void write_convergence_figure(std::ostream& md, const StudyConfig& config, const StudyResult& result) {
   std::string script, plot;
   bool positive = true;
   for (size_t m = 0; m < result.methods.size(); ++m) {
-    const auto& r = result.methods[m];
-    size_t n = 0;
-    for (const auto& c : r.campaigns) n = std::max(n, c.best_history.size());
-    script += "$c" + std::to_string(m) + " << EOD\n";
-    for (size_t i = 0; i < n; ++i) {
-      double sum = 0;
-      int count = 0;
-      for (const auto& c : r.campaigns)
-        if (i < c.best_history.size() && std::isfinite(c.best_history[i])) sum += c.best_history[i], ++count;
-      if (count == 0) continue;
-      if (sum <= 0) positive = false;
-      script += std::to_string((i + 1) * cases) + " " + format("%.10g", sum / count) + "\n";
-    }
-    script += "EOD\n";
-    plot += std::string(m ? ", " : "") + "$c" + std::to_string(m) + " using 1:2 with lines lw 2 title '" + r.method.label + "'";
+    script += mean_best_datablock(result.methods[m], m, config.campaign.cases.size(), positive);
+    plot += std::string(m ? ", " : "") + "$c" + std::to_string(m) + " using 1:2 with lines lw 2 title '" +
+            result.methods[m].method.label + "'";
   }
   script += "set xlabel 'simulations'\nset ylabel 'best fitness, mean over seeds'\nset grid\nset key top right\n";
   if (positive) script += "set logscale y\n";
@@ -304,36 +328,60 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
   md << "\n## Convergence\n\n"
      << (convergence_error.empty() ? "![mean best fitness against simulations](figures/convergence.png)\n"
                                    : "*Figure not drawn: " + convergence_error + "*\n");
+}
 
+// "set xrange [lower:upper]" over a parameter's range, in display units.
+std::string axis_range(char axis, const ParameterSpec& p) {
+  return std::string("set ") + axis + "range [" + format("%.10g", display_value(p.name, p.lower)) + ":" +
+         format("%.10g", display_value(p.name, p.upper)) + "]\n";
+}
+
+// The per-seed best sets of every method, `x` against `y`; returns the figure's markdown.
+std::string positions_figure(const StudyConfig& config, const StudyResult& result, const ParameterSpec& x,
+                             const ParameterSpec& y) {
+  static const char* colours[] = {"#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf", "#7f7f7f"};
+  std::string s, p;
+  for (size_t m = 0; m < result.methods.size(); ++m) {
+    s += "$m" + std::to_string(m) + " << EOD\n";
+    for (const auto& c : result.methods[m].campaigns)
+      if (std::isfinite(c.best.fitness))
+        s += format("%.10g", display_value(x.name, c.best.params.at(x.name))) + " " +
+             format("%.10g", display_value(y.name, c.best.params.at(y.name))) + "\n";
+    s += "EOD\n";
+    p += std::string(m ? ", " : "") + "$m" + std::to_string(m) + " using 1:2 with points pt " + std::to_string(5 + 2 * (m % 4)) +
+         " ps 1.6 lc rgb '" + colours[m % 8] + "' title '" + result.methods[m].method.label + "'";
+  }
+  s += "set xlabel '" + header_of(x.name) + "'\nset ylabel '" + header_of(y.name) + "'\n";
+  s += axis_range('x', x) + axis_range('y', y);
+  if (x.scale == ParameterSpec::Scale::log10) s += "set logscale x\n";
+  if (y.scale == ParameterSpec::Scale::log10) s += "set logscale y\n";
+  s += "set grid\nset key outside right\n";
+  const std::string file = "figures/positions_" + folder_name(x.name) + "_" + folder_name(y.name) + ".png";
+  const std::string error = run_gnuplot(s + "plot " + p + "\n", (fs::path(config.output) / file).string());
+  return error.empty() ? "![" + x.name + " against " + y.name + "](" + file + ")\n\n"
+                       : "*Figure not drawn: " + error + "*\n\n";
+}
+
+void write_parameter_space_figures(std::ostream& md, const StudyConfig& config, const StudyResult& result) {
+  const auto& free = config.campaign.space.free_parameters();
   md << "\n## Calibrated sets in parameter space\n\nThe best set of every seed, one symbol per method (the paper's "
         "Figures 14, 17, 20, 23).\n\n";
-  static const char* colours[] = {"#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf", "#7f7f7f"};
   for (size_t a = 0; a < free.size(); ++a)
-    for (size_t b = a + 1; b < free.size(); ++b) {
-      std::string s, p;
-      for (size_t m = 0; m < result.methods.size(); ++m) {
-        s += "$m" + std::to_string(m) + " << EOD\n";
-        for (const auto& c : result.methods[m].campaigns)
-          if (std::isfinite(c.best.fitness))
-            s += format("%.10g", display_value(free[a].name, c.best.params.at(free[a].name))) + " " +
-                 format("%.10g", display_value(free[b].name, c.best.params.at(free[b].name))) + "\n";
-        s += "EOD\n";
-        p += std::string(m ? ", " : "") + "$m" + std::to_string(m) + " using 1:2 with points pt " + std::to_string(5 + 2 * (m % 4)) +
-             " ps 1.6 lc rgb '" + colours[m % 8] + "' title '" + result.methods[m].method.label + "'";
-      }
-      s += "set xlabel '" + header_of(free[a].name) + "'\nset ylabel '" + header_of(free[b].name) + "'\n";
-      s += "set xrange [" + format("%.10g", display_value(free[a].name, free[a].lower)) + ":" +
-           format("%.10g", display_value(free[a].name, free[a].upper)) + "]\n";
-      s += "set yrange [" + format("%.10g", display_value(free[b].name, free[b].lower)) + ":" +
-           format("%.10g", display_value(free[b].name, free[b].upper)) + "]\n";
-      if (free[a].scale == optimise::ParameterSpec::Scale::log10) s += "set logscale x\n";
-      if (free[b].scale == optimise::ParameterSpec::Scale::log10) s += "set logscale y\n";
-      s += "set grid\nset key outside right\n";
-      const std::string file = "figures/positions_" + folder_name(free[a].name) + "_" + folder_name(free[b].name) + ".png";
-      const std::string error = run_gnuplot(s + "plot " + p + "\n", (fs::path(config.output) / file).string());
-      md << (error.empty() ? "![" + free[a].name + " against " + free[b].name + "](" + file + ")\n\n"
-                           : "*Figure not drawn: " + error + "*\n\n");
-    }
+    for (size_t b = a + 1; b < free.size(); ++b) md << positions_figure(config, result, free[a], free[b]);
+}
+
+void write_markdown(const StudyConfig& config, const StudyResult& result) {
+  std::ostringstream md;
+  write_study_summary(md, config);
+  write_five_best(md, config, result);
+  write_fitness_tables(md, result);
+  write_simulations_used(md, result);
+  write_failed_campaigns(md, result);
+
+  // Figures: mean best-so-far against simulations; the per-seed best sets in parameter space.
+  fs::create_directories(fs::path(config.output) / "figures");
+  write_convergence_figure(md, config, result);
+  write_parameter_space_figures(md, config, result);
   std::ofstream out(result.markdown_path);
   out << md.str();
   if (!out) throw CampaignError(result.markdown_path + ": cannot write");

@@ -159,13 +159,19 @@ std::string shown(const std::string& cell) {
   return out;
 }
 
+// "a, b, c"
+std::string joined_names(const std::vector<Column>& columns) {
+  std::string names;
+  for (const auto& c : columns) names += (names.empty() ? "" : ", ") + c.name;
+  return names;
+}
+
 }  // namespace
 
 const Column& Curve::column(const std::string& name) const {
   for (const auto& c : columns)
     if (c.name == name) return c;
-  std::string names;
-  for (const auto& c : columns) names += (names.empty() ? "" : ", ") + c.name;
+  const std::string names = joined_names(columns);
   throw CurveError(source + ": no column '" + name + "' (columns: " + (names.empty() ? "none" : names) + ")");
 }
 
@@ -185,139 +191,185 @@ std::vector<std::string> Curve::column_names() const {
 
 std::size_t Curve::rows() const { return columns.empty() ? 0 : columns.front().values.size(); }
 
-Curve parse_curve(const std::string& text, const std::string& source, const CurveReadOptions& options) {
-  // Lines, converted to UTF-8, with their 1-based numbers.
-  std::vector<std::pair<std::size_t, std::string>> lines;
-  {
-    std::size_t start = 0, number = 0;
-    while (start <= text.size()) {
-      auto end = text.find('\n', start);
-      if (end == std::string::npos) end = text.size();
-      std::string line = text.substr(start, end - start);
-      ++number;
-      if (number == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line = line.substr(3);
-      if (!line.empty() && line.back() == '\r') line.pop_back();
-      if (!valid_utf8(line)) line = latin1_to_utf8(line);
-      if (!trim(line).empty()) lines.emplace_back(number, line);
-      start = end + 1;
-    }
-  }
-  if (lines.empty()) throw CurveError(source + ": empty file (no header, no data)");
+namespace {
 
-  // Separator and first data line: the first candidate separator that yields a line of >= 2
-  // numeric cells wins.
+// A non-blank line of the file, converted to UTF-8, with its 1-based number.
+using NumberedLine = std::pair<std::size_t, std::string>;
+
+std::string at_line(const std::string& source, std::size_t number) {
+  return source + ": line " + std::to_string(number);
+}
+
+std::vector<NumberedLine> non_blank_lines(const std::string& text) {
+  std::vector<NumberedLine> lines;
+  std::size_t start = 0, number = 0;
+  while (start <= text.size()) {
+    auto end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    std::string line = text.substr(start, end - start);
+    ++number;
+    if (number == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line = line.substr(3);
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (!valid_utf8(line)) line = latin1_to_utf8(line);
+    if (!trim(line).empty()) lines.emplace_back(number, line);
+    start = end + 1;
+  }
+  return lines;
+}
+
+// How the data is written: its separator, its decimal mark and its first line (an index of lines).
+struct DataLayout {
+  char separator = 0;  // 0: no line of numbers found
+  bool decimal_comma = false;
+  std::size_t first_data = 0;
+};
+
+// The first candidate separator that yields a line of >= 2 numeric cells wins.
+DataLayout find_data_layout(const std::vector<NumberedLine>& lines, const CurveReadOptions& options) {
   const std::vector<char> candidates =
       options.separator ? std::vector<char>{options.separator} : std::vector<char>{'\t', ';', ','};
-  char sep = 0;
-  bool decimal_comma = false;
-  std::size_t first_data = lines.size();
+  DataLayout layout;
+  layout.first_data = lines.size();
   for (char c : candidates) {
     for (bool dc : {false, true}) {
       if (dc && c == ',') continue;
       for (std::size_t i = 0; i < lines.size(); ++i) {
         if (is_data_line(split(lines[i].second, c), dc)) {
-          if (i < first_data || (i == first_data && !sep)) {
-            first_data = i;
-            sep = c;
-            decimal_comma = dc;
+          if (i < layout.first_data || (i == layout.first_data && !layout.separator)) {
+            layout.first_data = i;
+            layout.separator = c;
+            layout.decimal_comma = dc;
           }
           break;
         }
       }
-      if (sep) break;
+      if (layout.separator) break;
     }
-    if (sep) break;
+    if (layout.separator) break;
   }
+  return layout;
+}
 
-  if (!sep) {
-    // No numeric row at all: report the first line after the header that is not numeric.
-    const auto& [number, line] = lines.size() > 1 ? lines[1] : lines[0];
-    if (lines.size() == 1)
-      throw CurveError(source + ": line " + std::to_string(lines[0].first) + ": no data rows (only a header)");
-    if (is_data_line({trim(line), "0"}, false))  // a number alone on its line: a file of one column
-      throw CurveError(source + ": line " + std::to_string(number) + ": one column only ('" + trim(line) +
-                       "'); a curve needs a force column and at least one displacement column, separated by ',', ';' "
-                       "or a tab");
-    throw CurveError(source + ": line " + std::to_string(number) + ": no numeric data rows found (first: '" +
-                     trim(line) + "'); cells must be numbers separated by ',', ';' or a tab");
-  }
+// No numeric row at all: reports the first line after the header that is not numeric.
+[[noreturn]] void throw_no_data_rows(const std::vector<NumberedLine>& lines, const std::string& source) {
+  const auto& [number, line] = lines.size() > 1 ? lines[1] : lines[0];
+  if (lines.size() == 1) throw CurveError(at_line(source, lines[0].first) + ": no data rows (only a header)");
+  if (is_data_line({trim(line), "0"}, false))  // a number alone on its line: a file of one column
+    throw CurveError(at_line(source, number) + ": one column only ('" + trim(line) +
+                     "'); a curve needs a force column and at least one displacement column, separated by ',', ';' "
+                     "or a tab");
+  throw CurveError(at_line(source, number) + ": no numeric data rows found (first: '" + trim(line) +
+                   "'); cells must be numbers separated by ',', ';' or a tab");
+}
 
-  // Header: [preamble...] names [units] data...
-  Curve curve;
-  curve.source = source;
-  if (first_data == 0) throw CurveError(source + ": line " + std::to_string(lines[0].first) + ": no column names before the data");
-  std::size_t names_index = first_data - 1;
-  std::vector<std::string> units;
-  if (is_units_row(split(lines[names_index].second, sep))) {
-    units = split(lines[names_index].second, sep);
-    if (names_index == 0)
-      throw CurveError(source + ": line " + std::to_string(lines[0].first) + ": a units row but no column names");
-    --names_index;
+// The rows above the data: [preamble...] names [units].
+struct Header {
+  std::size_t names_index = 0;  // index in lines of the column names
+  std::vector<std::string> name_cells;
+  std::vector<std::string> units;  // empty without a units row
+};
+
+Header find_header(const std::vector<NumberedLine>& lines, const DataLayout& layout, const std::string& source) {
+  if (layout.first_data == 0) throw CurveError(at_line(source, lines[0].first) + ": no column names before the data");
+  Header header;
+  header.names_index = layout.first_data - 1;
+  if (is_units_row(split(lines[header.names_index].second, layout.separator))) {
+    header.units = split(lines[header.names_index].second, layout.separator);
+    if (header.names_index == 0)
+      throw CurveError(at_line(source, lines[0].first) + ": a units row but no column names");
+    --header.names_index;
   }
-  const auto name_cells = split(lines[names_index].second, sep);
-  const std::size_t line_of_names = lines[names_index].first;
-  // A "names" row that holds a number is a data row with a bad cell (e.g. the first data row).
+  header.name_cells = split(lines[header.names_index].second, layout.separator);
+  return header;
+}
+
+// A "names" row that holds a number is a data row with a bad cell (e.g. the first data row).
+void reject_numeric_names(const std::vector<std::string>& name_cells, bool decimal_comma, std::size_t line_of_names,
+                          const std::string& source) {
   for (std::size_t j = 0; j < name_cells.size(); ++j) {
     double v;
     if (parse_cell(name_cells[j], decimal_comma, &v) == CellKind::number && name_cells.size() > 1) {
       for (std::size_t k = 0; k < name_cells.size(); ++k)
         if (parse_cell(name_cells[k], decimal_comma, &v) == CellKind::text)
-          throw CurveError(source + ": line " + std::to_string(line_of_names) + ", column " +
-                           std::to_string(k + 1) + ": non-numeric value " + shown(name_cells[k]) +
-                           " (no column names found above it)");
+          throw CurveError(at_line(source, line_of_names) + ", column " + std::to_string(k + 1) +
+                           ": non-numeric value " + shown(name_cells[k]) + " (no column names found above it)");
     }
   }
-  for (std::size_t i = 0; i < names_index; ++i) curve.preamble.push_back(lines[i].second);
+}
 
+// Empty columns named by the header, with their units (a units row overrides a unit in the name).
+std::vector<Column> header_columns(const Header& header, std::size_t line_of_names, const std::string& source) {
+  std::vector<Column> columns;
   std::set<std::string> seen;
-  for (std::size_t j = 0; j < name_cells.size(); ++j) {
+  for (std::size_t j = 0; j < header.name_cells.size(); ++j) {
     Column col;
-    split_name_unit(name_cells[j], &col.name, &col.unit);
-    if (j < units.size() && !trim(units[j]).empty()) col.unit = strip_unit_brackets(units[j]);
+    split_name_unit(header.name_cells[j], &col.name, &col.unit);
+    if (j < header.units.size() && !trim(header.units[j]).empty()) col.unit = strip_unit_brackets(header.units[j]);
     if (col.name.empty())
-      throw CurveError(source + ": line " + std::to_string(line_of_names) + ", column " + std::to_string(j + 1) +
-                       ": empty column name");
+      throw CurveError(at_line(source, line_of_names) + ", column " + std::to_string(j + 1) + ": empty column name");
     if (!seen.insert(col.name).second)
-      throw CurveError(source + ": line " + std::to_string(line_of_names) + ", column " + std::to_string(j + 1) +
+      throw CurveError(at_line(source, line_of_names) + ", column " + std::to_string(j + 1) +
                        ": duplicate column name '" + col.name + "'");
-    curve.columns.push_back(std::move(col));
+    columns.push_back(std::move(col));
   }
-  if (!units.empty() && units.size() != name_cells.size())
-    throw CurveError(source + ": line " + std::to_string(lines[names_index + 1].first) + ": " +
-                     std::to_string(units.size()) + " units for " + std::to_string(name_cells.size()) + " columns");
+  return columns;
+}
 
-  if (auto m = limits::check(limits::Limit::curve_rows, static_cast<double>(lines.size() - first_data)))
-    throw CurveError(source + ": line " + std::to_string(lines[first_data].first) + " on: " + *m);
+// Appends the data rows to the curve's columns; returns how many rows hold only finite values.
+std::size_t read_data_rows(const std::vector<NumberedLine>& lines, const DataLayout& layout, Curve& curve) {
+  const std::string& source = curve.source;
+  if (auto m = limits::check(limits::Limit::curve_rows, static_cast<double>(lines.size() - layout.first_data)))
+    throw CurveError(at_line(source, lines[layout.first_data].first) + " on: " + *m);
   const std::size_t ncol = curve.columns.size();
   std::size_t finite_rows = 0;
-  for (std::size_t i = first_data; i < lines.size(); ++i) {
-    auto cells = split(lines[i].second, sep);
+  for (std::size_t i = layout.first_data; i < lines.size(); ++i) {
+    auto cells = split(lines[i].second, layout.separator);
     while (cells.size() > ncol && trim(cells.back()).empty()) cells.pop_back();  // trailing separator
     if (cells.size() != ncol)
-      throw CurveError(source + ": line " + std::to_string(lines[i].first) + ": " + std::to_string(cells.size()) +
-                       " cells, expected " + std::to_string(ncol) + " (columns: " + [&] {
-                         std::string s;
-                         for (const auto& c : curve.columns) s += (s.empty() ? "" : ", ") + c.name;
-                         return s;
-                       }() + ")");
+      throw CurveError(at_line(source, lines[i].first) + ": " + std::to_string(cells.size()) + " cells, expected " +
+                       std::to_string(ncol) + " (columns: " + joined_names(curve.columns) + ")");
     bool all_finite = true;
     for (std::size_t j = 0; j < ncol; ++j) {
       double v;
-      if (parse_cell(cells[j], decimal_comma, &v) == CellKind::text)
-        throw CurveError(source + ": line " + std::to_string(lines[i].first) + ", column '" + curve.columns[j].name +
+      if (parse_cell(cells[j], layout.decimal_comma, &v) == CellKind::text)
+        throw CurveError(at_line(source, lines[i].first) + ", column '" + curve.columns[j].name +
                          "': non-numeric value " + shown(cells[j]));
       all_finite = all_finite && std::isfinite(v);
       curve.columns[j].values.push_back(v);
     }
     if (all_finite) ++finite_rows;
   }
+  return finite_rows;
+}
+
+}  // namespace
+
+Curve parse_curve(const std::string& text, const std::string& source, const CurveReadOptions& options) {
+  const std::vector<NumberedLine> lines = non_blank_lines(text);
+  if (lines.empty()) throw CurveError(source + ": empty file (no header, no data)");
+  const DataLayout layout = find_data_layout(lines, options);
+  if (!layout.separator) throw_no_data_rows(lines, source);
+
+  Curve curve;
+  curve.source = source;
+  const Header header = find_header(lines, layout, source);
+  const std::size_t line_of_names = lines[header.names_index].first;
+  reject_numeric_names(header.name_cells, layout.decimal_comma, line_of_names, source);
+  for (std::size_t i = 0; i < header.names_index; ++i) curve.preamble.push_back(lines[i].second);
+  curve.columns = header_columns(header, line_of_names, source);
+  if (!header.units.empty() && header.units.size() != header.name_cells.size())
+    throw CurveError(at_line(source, lines[header.names_index + 1].first) + ": " +
+                     std::to_string(header.units.size()) + " units for " + std::to_string(header.name_cells.size()) +
+                     " columns");
+
+  const std::size_t finite_rows = read_data_rows(lines, layout, curve);
   if (options.reject_all_nan_columns)
     for (const auto& c : curve.columns)
       if (std::none_of(c.values.begin(), c.values.end(), [](double v) { return std::isfinite(v); }))
         throw CurveError(source + ": column '" + c.name + "' (line " + std::to_string(line_of_names) +
                          "): every value is NaN or empty");
   if (finite_rows < options.min_rows)
-    throw CurveError(source + ": line " + std::to_string(lines[first_data].first) + ": " + std::to_string(finite_rows) +
+    throw CurveError(at_line(source, lines[layout.first_data].first) + ": " + std::to_string(finite_rows) +
                      " data row" + (finite_rows == 1 ? "" : "s") + " with finite values, at least " +
                      std::to_string(options.min_rows) + " needed");
   return curve;
