@@ -1,5 +1,7 @@
 #include "demcal/pipelines/process.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <dirent.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -429,9 +431,7 @@ ProcessResult run_process(const ProcessOptions& options) {
   }
   if (m.kind == kKilled) {
     result.status = cancelled ? ProcessStatus::cancelled : ProcessStatus::timed_out;
-    char buffer[96];
-    std::snprintf(buffer, sizeof buffer, "killed after the %g s timeout", options.timeout_s);
-    result.message = cancelled ? "killed: campaign cancelled" : buffer;
+    result.message = cancelled ? "killed: campaign cancelled" : "killed after the " + format_number(options.timeout_s, 6) + " s timeout";
     return result;
   }
   const int wait_status = m.value;

@@ -1,12 +1,12 @@
 #include "demcal/pipelines/study.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/limits/limits.hpp"
 #include "demcal/pipelines/report.hpp"
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -44,12 +44,12 @@ std::string header_of(const std::string& name) {
 }
 double display_value(const std::string& name, double v) { return is_stiffness(name) ? v / 1e9 : v; }
 
-std::string format(const char* pattern, double v) {
-  if (!std::isfinite(v)) return "-";
-  char b[64];
-  std::snprintf(b, sizeof b, pattern, v);
-  return b;
-}
+// Numbers in tables and gnuplot scripts; NaN and +/-inf are "-".
+constexpr NumberFormat three_digits{.significant_digits = 3, .non_finite = "-"};
+constexpr NumberFormat six_digits{.significant_digits = 6, .non_finite = "-"};
+constexpr NumberFormat ten_digits{.significant_digits = 10, .non_finite = "-"};
+constexpr NumberFormat one_decimal{.fixed_decimals = 1, .non_finite = "-"};
+constexpr NumberFormat two_decimals{.fixed_decimals = 2, .non_finite = "-"};
 
 json statistics_json(const FitnessStatistics& s) {
   return {{"count", s.count}, {"mean", s.mean}, {"stddev", s.stddev}, {"median", s.median}, {"min", s.min}, {"max", s.max}};
@@ -235,11 +235,13 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
       md << "| " << (rank == 0 ? r.method.label : "") << " | " << (rank == 0 ? std::to_string(r.method.iterations) : "")
          << " | " << rank + 1 << " |";
       for (const auto& p : free)
-        md << " " << (c.best.params.count(p.name) ? format(is_stiffness(p.name) ? "%.3g" : "%.2f", display_value(p.name, c.best.params.at(p.name))) : "-")
+        md << " " << (c.best.params.count(p.name) ? format_number(display_value(p.name, c.best.params.at(p.name)),
+                                                                  is_stiffness(p.name) ? three_digits : two_decimals)
+                                                  : "-")
            << " |";
       const auto hit = std::find(c.best_history.begin(), c.best_history.end(), c.best.fitness);
       const long found = static_cast<long>(hit - c.best_history.begin()) + 1;
-      md << " " << format("%.1f", c.best.fitness) << " | " << c.seed << " | "
+      md << " " << format_number(c.best.fitness, one_decimal) << " | " << c.seed << " | "
          << (std::isfinite(c.best.fitness) ? std::to_string(found * static_cast<long>(cases)) : "-") << " |\n";
     }
 
@@ -248,16 +250,18 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
   for (const auto& r : result.methods) {
     const auto& s = r.fitness;
     md << "| " << r.method.label << " | " << r.method.iterations << " | " << s.count << "/" << r.campaigns.size() << " | "
-       << format("%.1f", s.mean) << " | " << format("%.1f", s.stddev) << " | " << format("%.1f", s.median) << " | "
-       << format("%.1f", s.min) << " | " << format("%.1f", s.max) << " |\n";
+       << format_number(s.mean, one_decimal) << " | " << format_number(s.stddev, one_decimal) << " | "
+       << format_number(s.median, one_decimal) << " | " << format_number(s.min, one_decimal) << " | "
+       << format_number(s.max, one_decimal) << " |\n";
   }
   md << "\n## At equal cost: best fitness after " << result.common_budget
      << " simulations\n\nThe per-seed best after the fewest simulations any method used, so that methods with "
         "larger budgets are compared at the same cost.\n\n| method | mean | std | median | min | max |\n|---|---|---|---|---|---|\n";
   for (const auto& r : result.methods) {
     const auto& s = r.fitness_at_common_budget;
-    md << "| " << r.method.label << " | " << format("%.1f", s.mean) << " | " << format("%.1f", s.stddev) << " | "
-       << format("%.1f", s.median) << " | " << format("%.1f", s.min) << " | " << format("%.1f", s.max) << " |\n";
+    md << "| " << r.method.label << " | " << format_number(s.mean, one_decimal) << " | " << format_number(s.stddev, one_decimal)
+       << " | " << format_number(s.median, one_decimal) << " | " << format_number(s.min, one_decimal) << " | "
+       << format_number(s.max, one_decimal) << " |\n";
   }
   md << "\n## Simulations used\n\n| method | per campaign | all seeds | simulated in this session (rest read from the "
         "archive) | wall time this session (s) |\n|---|---|---|---|---|\n";
@@ -265,7 +269,7 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
     long simulated = 0;
     for (const auto& c : r.campaigns) simulated += c.simulated;
     md << "| " << r.method.label << " | " << r.simulations_per_campaign << " | " << r.simulations_total << " | "
-       << simulated << " | " << format("%.1f", r.wall_time_s) << " |\n";
+       << simulated << " | " << format_number(r.wall_time_s, one_decimal) << " |\n";
   }
   bool any_failed = false;
   for (const auto& r : result.methods)
@@ -292,7 +296,7 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
         if (i < c.best_history.size() && std::isfinite(c.best_history[i])) sum += c.best_history[i], ++count;
       if (count == 0) continue;
       if (sum <= 0) positive = false;
-      script += std::to_string((i + 1) * cases) + " " + format("%.10g", sum / count) + "\n";
+      script += std::to_string((i + 1) * cases) + " " + format_number(sum / count, ten_digits) + "\n";
     }
     script += "EOD\n";
     plot += std::string(m ? ", " : "") + "$c" + std::to_string(m) + " using 1:2 with lines lw 2 title '" + r.method.label + "'";
@@ -315,17 +319,17 @@ void write_markdown(const StudyConfig& config, const StudyResult& result) {
         s += "$m" + std::to_string(m) + " << EOD\n";
         for (const auto& c : result.methods[m].campaigns)
           if (std::isfinite(c.best.fitness))
-            s += format("%.10g", display_value(free[a].name, c.best.params.at(free[a].name))) + " " +
-                 format("%.10g", display_value(free[b].name, c.best.params.at(free[b].name))) + "\n";
+            s += format_number(display_value(free[a].name, c.best.params.at(free[a].name)), ten_digits) + " " +
+                 format_number(display_value(free[b].name, c.best.params.at(free[b].name)), ten_digits) + "\n";
         s += "EOD\n";
         p += std::string(m ? ", " : "") + "$m" + std::to_string(m) + " using 1:2 with points pt " + std::to_string(5 + 2 * (m % 4)) +
              " ps 1.6 lc rgb '" + colours[m % 8] + "' title '" + result.methods[m].method.label + "'";
       }
       s += "set xlabel '" + header_of(free[a].name) + "'\nset ylabel '" + header_of(free[b].name) + "'\n";
-      s += "set xrange [" + format("%.10g", display_value(free[a].name, free[a].lower)) + ":" +
-           format("%.10g", display_value(free[a].name, free[a].upper)) + "]\n";
-      s += "set yrange [" + format("%.10g", display_value(free[b].name, free[b].lower)) + ":" +
-           format("%.10g", display_value(free[b].name, free[b].upper)) + "]\n";
+      s += "set xrange [" + format_number(display_value(free[a].name, free[a].lower), ten_digits) + ":" +
+           format_number(display_value(free[a].name, free[a].upper), ten_digits) + "]\n";
+      s += "set yrange [" + format_number(display_value(free[b].name, free[b].lower), ten_digits) + ":" +
+           format_number(display_value(free[b].name, free[b].upper), ten_digits) + "]\n";
       if (free[a].scale == optimise::ParameterSpec::Scale::log10) s += "set logscale x\n";
       if (free[b].scale == optimise::ParameterSpec::Scale::log10) s += "set logscale y\n";
       s += "set grid\nset key outside right\n";
@@ -380,8 +384,8 @@ StudyResult run_study(const StudyConfig& config, bool progress) {
       r.simulations_total += sc.simulations;
       r.wall_time_s += sc.wall_time_s;
       if (progress)
-        std::cerr << r.method.label << " seed " << seed << ": best " << format("%.6g", sc.best.fitness) << " ("
-                  << sc.simulations << " simulations, " << sc.simulated << " new, " << format("%.1f", sc.wall_time_s)
+        std::cerr << r.method.label << " seed " << seed << ": best " << format_number(sc.best.fitness, six_digits) << " ("
+                  << sc.simulations << " simulations, " << sc.simulated << " new, " << format_number(sc.wall_time_s, one_decimal)
                   << " s)" << (sc.status == CampaignStatus::completed ? "" : " FAILED: " + sc.message) << "\n";
       r.campaigns.push_back(std::move(sc));
     }
