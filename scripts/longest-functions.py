@@ -18,7 +18,7 @@ import os
 import re
 import sys
 
-DEFAULT_FOLDERS = ["dem", "optimise", "smoothing", "surrogate", "pipelines", "limits"]
+DEFAULT_FOLDERS = ["dem", "optimise", "smoothing", "surrogate", "pipelines", "limits", "common"]
 EXTENSIONS = (".cpp", ".hpp", ".h", ".cc")
 QUALIFIERS = r"(?:\s*(?:const|noexcept(?:\s*\([^)]*\))?|override|final|mutable|&|&&))*"
 FUNCTION_END = re.compile(r"\)" + QUALIFIERS + r"\s*(?:->\s*[\w:<>,\s*&\[\]]+)?\s*$")

@@ -2,6 +2,7 @@
 
 #include "geometry.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/limits/limits.hpp"
 
 #include <nlohmann/json.hpp>
@@ -23,27 +24,21 @@ namespace {
 
 constexpr double kDegree = std::numbers::pi / 180.0;
 
-std::string format_value(double v) {
-  std::ostringstream s;
-  s << std::setprecision(10) << v;
-  return s.str();
-}
-
 void require_finite(double v, const std::string& where) {
-  if (!std::isfinite(v)) throw SceneError(where, "value is not a finite number (" + format_value(v) + ")");
+  if (!std::isfinite(v)) throw SceneError(where, "value is not a finite number (" + format_number(v, 10) + ")");
 }
 void require_positive(double v, const std::string& where) {
   require_finite(v, where);
-  if (v <= 0) throw SceneError(where, "must be positive, got " + format_value(v));
+  if (v <= 0) throw SceneError(where, "must be positive, got " + format_number(v, 10));
 }
 void require_non_negative(double v, const std::string& where) {
   require_finite(v, where);
-  if (v < 0) throw SceneError(where, "must not be negative, got " + format_value(v));
+  if (v < 0) throw SceneError(where, "must not be negative, got " + format_number(v, 10));
 }
 void require_unit(const Vec2& v, const std::string& where) {
   require_finite(v.x(), where);
   require_finite(v.y(), where);
-  if (std::abs(v.norm() - 1) > 1e-6) throw SceneError(where, "must be a unit vector, got norm " + format_value(v.norm()));
+  if (std::abs(v.norm() - 1) > 1e-6) throw SceneError(where, "must be a unit vector, got norm " + format_number(v.norm(), 10));
 }
 
 // Reads typed values from one JSON object and names the key path in every error.
@@ -117,15 +112,15 @@ constexpr double kMaxCompressiveStrength = 1e9;  // Pa: stronger than any stone
 
 void require_at_most(double v, double bound, const std::string& where, const std::string& why) {
   require_non_negative(v, where);
-  if (v > bound) throw SceneError(where, "must be at most " + format_value(bound) + " (" + why + "), got " + format_value(v));
+  if (v > bound) throw SceneError(where, "must be at most " + format_number(bound, 10) + " (" + why + "), got " + format_number(v, 10));
 }
 
 // An angle of the friction law (rad) in [0, friction_angle]; the upper limit only where `capped`.
 void require_within_friction(double angle, double friction_angle, bool capped, const std::string& where) {
   require_finite(angle, where);
   if (angle < 0 || (capped && angle > friction_angle))
-    throw SceneError(where, "must be in [0, friction_deg = " + format_value(friction_angle / kDegree) +
-                                "] degrees, got " + format_value(angle / kDegree));
+    throw SceneError(where, "must be in [0, friction_deg = " + format_number(friction_angle / kDegree, 10) +
+                                "] degrees, got " + format_number(angle / kDegree, 10));
 }
 
 }  // namespace
@@ -141,15 +136,15 @@ void JointMaterial::Validate(const std::string& where) const {
   require_finite(friction_angle, where + ".friction_deg");
   if (friction_angle < 0 || friction_angle >= std::numbers::pi / 2)
     throw SceneError(where + ".friction_deg",
-                     "must be in [0, 90) degrees, got " + format_value(friction_angle / kDegree));
+                     "must be in [0, 90) degrees, got " + format_number(friction_angle / kDegree, 10));
   require_at_most(closure_max, kMaxClosure, where + ".closure_max", "m; a rough joint closes by at most millimetres");
   require_non_negative(slip_softening, where + ".slip_softening");
   require_within_friction(friction_residual, friction_angle, softening_on(), where + ".friction_residual_deg");
   require_within_friction(friction_loss, friction_angle, true, where + ".friction_loss_deg");
   if (friction_loss > 0 && friction_residual != 0)
     throw SceneError(where + ".friction_loss_deg", "set friction_residual_deg or friction_loss_deg, not both (got " +
-                                                       format_value(friction_residual / kDegree) + " and " +
-                                                       format_value(friction_loss / kDegree) + " degrees)");
+                                                       format_number(friction_residual / kDegree, 10) + " and " +
+                                                       format_number(friction_loss / kDegree, 10) + " degrees)");
   require_at_most(cohesion, kMaxBondStrength, where + ".cohesion", "Pa");
   require_at_most(tensile_strength, kMaxBondStrength, where + ".tensile_strength", "Pa");
   require_at_most(compressive_strength, kMaxCompressiveStrength, where + ".compressive_strength", "Pa");
@@ -233,7 +228,7 @@ void validate_no_overlap_at_start(const std::vector<Block>& blocks, const std::s
       const double depth = geometry::overlap_depth(blocks[i].vertices, blocks[j].vertices);
       if (depth > 1e-7)
         throw SceneError(s + "blocks", "blocks '" + blocks[i].name + "' and '" + blocks[j].name +
-                                           "' overlap at the start by " + format_value(depth) + " m");
+                                           "' overlap at the start by " + format_number(depth, 10) + " m");
     }
 }
 
@@ -254,9 +249,9 @@ void validate_joint_gap(const Scene& scene, const std::string& s) {
   require_at_most(joint_gap.opening, JointGap::kMaxOpening, where + ".opening", "m; a fit imperfection");
   require_finite(joint_gap.taper, where + ".taper");
   if (std::abs(joint_gap.taper) > JointGap::kMaxTaper)
-    throw SceneError(where + ".taper", "must be in [-" + format_value(JointGap::kMaxTaper) + ", " +
-                                           format_value(JointGap::kMaxTaper) + "] (beyond 1 it equals 1), got " +
-                                           format_value(joint_gap.taper));
+    throw SceneError(where + ".taper", "must be in [-" + format_number(JointGap::kMaxTaper, 10) + ", " +
+                                           format_number(JointGap::kMaxTaper, 10) + "] (beyond 1 it equals 1), got " +
+                                           format_number(joint_gap.taper, 10));
 }
 
 void validate_contact(const ContactSettings& contact, const std::string& s) {
@@ -272,16 +267,16 @@ void validate_contact(const ContactSettings& contact, const std::string& s) {
 void validate_solver(const SolverSettings& solver, const std::string& s) {
   require_finite(solver.local_damping, s + "solver.local_damping");
   if (solver.local_damping < 0 || solver.local_damping >= 1)
-    throw SceneError(s + "solver.local_damping", "must be in [0, 1), got " + format_value(solver.local_damping));
+    throw SceneError(s + "solver.local_damping", "must be in [0, 1), got " + format_number(solver.local_damping, 10));
   require_positive(solver.time_step_safety, s + "solver.time_step_safety");
   if (solver.time_step_safety > 1)
-    throw SceneError(s + "solver.time_step_safety", "must not exceed 1, got " + format_value(solver.time_step_safety));
+    throw SceneError(s + "solver.time_step_safety", "must not exceed 1, got " + format_number(solver.time_step_safety, 10));
   require_non_negative(solver.time_step, s + "solver.time_step");
   if (solver.time_step_faces != "all" && solver.time_step_faces != "in_contact")
     throw SceneError(s + "solver.time_step_faces", "must be all or in_contact, got '" + solver.time_step_faces + "'");
   require_finite(solver.density_scaling, s + "solver.density_scaling");
   if (solver.density_scaling < 1)
-    throw SceneError(s + "solver.density_scaling", "must be >= 1, got " + format_value(solver.density_scaling));
+    throw SceneError(s + "solver.density_scaling", "must be >= 1, got " + format_number(solver.density_scaling, 10));
   require_positive(solver.equilibrium_ratio, s + "solver.equilibrium_ratio");
   require_positive(solver.max_equilibrium_time, s + "solver.max_equilibrium_time");
   require_positive(solver.max_time, s + "solver.max_time");

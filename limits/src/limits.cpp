@@ -1,9 +1,10 @@
 #include "demcal/limits/limits.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <array>
 #include <atomic>
 #include <cmath>
-#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <mutex>
@@ -95,12 +96,8 @@ double value(Limit limit) {
 bool exceeds(Limit limit, double count) { return !(count <= value(limit)); }
 
 std::string number_text(double v) {
-  char buffer[32];
-  if (std::isfinite(v) && std::fabs(v) < 1e15 && v == std::floor(v))
-    std::snprintf(buffer, sizeof buffer, "%.0f", v);
-  else
-    std::snprintf(buffer, sizeof buffer, "%.6g", v);
-  return buffer;
+  if (std::isfinite(v) && std::fabs(v) < 1e15 && v == std::floor(v)) return format_number(v, {.fixed_decimals = 0});
+  return format_number(v, 6);
 }
 
 std::string message(Limit limit, double count) {

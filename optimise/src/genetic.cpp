@@ -1,6 +1,8 @@
 // Real-valued genetic algorithm (section 3.1 of the paper) in the unit cube.
 #include "internal.hpp"
 
+#include "demcal/common/random.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -188,7 +190,7 @@ class GeneticOptimiser final : public Optimiser {
       if (options_.ga_mutation == GaMutation::reset) {
         child[k] = uniform01(rng);
       } else {
-        child[k] = std::clamp(child[k] + sigma * standard_normal(rng), 0.0, 1.0);
+        child[k] = std::clamp(child[k] + sigma * normal(rng), 0.0, 1.0);
       }
     }
   }

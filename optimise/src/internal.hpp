@@ -1,6 +1,7 @@
-// Private helpers of the optimise module (random numbers, JSON of doubles and vectors, factories).
+// Private helpers of the optimise module (JSON of doubles and vectors, random streams, factories).
 #pragma once
 
+#include "demcal/common/random.hpp"
 #include "demcal/limits/limits.hpp"
 #include "demcal/optimise/optimiser.hpp"
 
@@ -10,33 +11,13 @@
 #include <cmath>
 #include <cstdint>
 #include <random>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 
 namespace demcal::optimise::detail {
 
-// A value with every digit, for messages that name it.
-inline std::string fmt(double value) {
-  std::ostringstream out;
-  out.precision(17);
-  out << value;
-  return out.str();
-}
-
 // Bad options or states are std::invalid_argument with the message naming the key and value.
 [[noreturn]] inline void fail(const std::string& message) { throw std::invalid_argument(message); }
-
-// Uniform in [0, 1) from the top 53 bits: identical on every standard library.
-inline double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
-
-// Standard normal by Box-Muller (two uniforms per draw, the second value discarded for simplicity).
-inline double standard_normal(std::mt19937_64& rng) {
-  double u1 = uniform01(rng);
-  const double u2 = uniform01(rng);
-  if (u1 <= 0.0) u1 = 0x1.0p-53;
-  return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586476925 * u2);
-}
 
 // Non-finite (NaN, ±inf) told values are the worst: +inf.
 inline double sanitise(double value) { return std::isfinite(value) ? value : HUGE_VAL; }
@@ -90,15 +71,9 @@ inline Eigen::VectorXd substitution_in_unit_cube(const std::string& name, const 
 }
 
 // Generator of the alternatives of candidate `index` at iteration `iteration` (optimiser.hpp):
-// seeded from (seed, iteration, index) by SplitMix64 steps, independent of the optimiser's stream.
+// seeded from (seed, iteration, index), independent of the optimiser's stream.
 inline std::mt19937_64 alternatives_rng(std::uint64_t seed, int iteration, std::size_t index) {
-  auto mix = [](std::uint64_t z) {
-    z += 0x9e3779b97f4a7c15ULL;
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return z ^ (z >> 31);
-  };
-  return std::mt19937_64(mix(mix(mix(seed) ^ static_cast<std::uint64_t>(iteration)) ^ index));
+  return seeded_rng(seed, iteration, index);
 }
 
 // Candidates per iteration the planned schedule assumes (options.evaluations_per_iteration).

@@ -2,6 +2,8 @@
 
 #include "internal.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -11,7 +13,6 @@
 namespace demcal::optimise {
 
 using detail::fail;
-using detail::fmt;
 
 // ---- enums ----------------------------------------------------------------------------------
 
@@ -74,10 +75,12 @@ void OptimiserOptions::Validate() const {
     limits::require_within(limits::Limit::evaluations, 1.0 * population * iterations, "option population x iterations");
   if (std::isnan(target_value)) fail("option target_value is NaN");
   auto finite_nonnegative = [](double v, const char* name) {
-    if (!std::isfinite(v) || v < 0.0) fail(std::string("option ") + name + " = " + fmt(v) + " must be finite and >= 0");
+    if (!std::isfinite(v) || v < 0.0)
+      fail(std::string("option ") + name + " = " + format_number(v, round_trip_digits) + " must be finite and >= 0");
   };
   auto probability = [](double v, const char* name) {
-    if (!(v >= 0.0 && v <= 1.0)) fail(std::string("option ") + name + " = " + fmt(v) + " must lie in [0, 1]");
+    if (!(v >= 0.0 && v <= 1.0))
+      fail(std::string("option ") + name + " = " + format_number(v, round_trip_digits) + " must lie in [0, 1]");
   };
   finite_nonnegative(inertia_start, "inertia_start");
   finite_nonnegative(inertia_end, "inertia_end");
@@ -95,14 +98,15 @@ void OptimiserOptions::Validate() const {
   if (constriction) {
     const double phi = algorithm == "tbpso" ? tbpso_cognitive + tbpso_social + tbpso_trust : pso_cognitive + pso_social;
     if (phi < 4.0)
-      fail("option constriction needs phi = sum of the acceleration weights >= 4, got " + fmt(phi) + " for " + algorithm);
+      fail("option constriction needs phi = sum of the acceleration weights >= 4, got " + format_number(phi, round_trip_digits) +
+           " for " + algorithm);
   }
   probability(crossover_probability, "crossover_probability");
   probability(mutation_probability, "mutation_probability");
   if (!(ga_sigma_start > 0.0) || !std::isfinite(ga_sigma_start))
-    fail("option ga_sigma_start = " + fmt(ga_sigma_start) + " must be finite and > 0");
+    fail("option ga_sigma_start = " + format_number(ga_sigma_start, round_trip_digits) + " must be finite and > 0");
   if (!(ga_sigma_end > 0.0) || !std::isfinite(ga_sigma_end))
-    fail("option ga_sigma_end = " + fmt(ga_sigma_end) + " must be finite and > 0");
+    fail("option ga_sigma_end = " + format_number(ga_sigma_end, round_trip_digits) + " must be finite and > 0");
   if (elitism < 0 || elitism >= population)
     fail("option elitism = " + std::to_string(elitism) + " must lie in [0, population - 1 = " +
          std::to_string(population - 1) + "]");
@@ -112,7 +116,7 @@ void OptimiserOptions::Validate() const {
   if (nlopt_population < 0) fail("option nlopt_population = " + std::to_string(nlopt_population) + " must be >= 0");
   for (std::size_t k = 0; k < initial_point.size(); ++k)
     if (!std::isfinite(initial_point[k]))
-      fail("option initial_point[" + std::to_string(k) + "] = " + fmt(initial_point[k]) + " is not finite");
+      fail("option initial_point[" + std::to_string(k) + "] = " + format_number(initial_point[k], round_trip_digits) + " is not finite");
   if (polish_evaluations < 0)
     fail("option polish_evaluations = " + std::to_string(polish_evaluations) + " must be >= 0");
   if (polish_evaluations > 0) {
@@ -123,7 +127,7 @@ void OptimiserOptions::Validate() const {
     if (detail::nlopt_name_from_algorithm("nlopt:" + polish_algorithm).empty())
       fail("option polish_algorithm = '" + polish_algorithm + "' is not a known NLopt algorithm");
     if (!(polish_initial_step > 0.0) || !std::isfinite(polish_initial_step))
-      fail("option polish_initial_step = " + fmt(polish_initial_step) + " must be finite and > 0");
+      fail("option polish_initial_step = " + format_number(polish_initial_step, round_trip_digits) + " must be finite and > 0");
   }
 }
 
@@ -257,8 +261,9 @@ void PolishOptions::Validate() const {
   if (max_evaluations <= 0) fail("polish max_evaluations = " + std::to_string(max_evaluations) + " must be > 0");
   limits::require_within(limits::Limit::evaluations, max_evaluations, "polish max_evaluations");
   if (!(initial_step > 0.0) || !std::isfinite(initial_step))
-    fail("polish initial_step = " + fmt(initial_step) + " must be finite and > 0");
-  if (!(xtol_rel >= 0.0) || !std::isfinite(xtol_rel)) fail("polish xtol_rel = " + fmt(xtol_rel) + " must be >= 0");
+    fail("polish initial_step = " + format_number(initial_step, round_trip_digits) + " must be finite and > 0");
+  if (!(xtol_rel >= 0.0) || !std::isfinite(xtol_rel))
+    fail("polish xtol_rel = " + format_number(xtol_rel, round_trip_digits) + " must be >= 0");
 }
 
 std::unique_ptr<Optimiser> make_polisher(const ParameterSpace& space, const Eigen::VectorXd& start_physical,

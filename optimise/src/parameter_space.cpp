@@ -1,6 +1,8 @@
 #include "demcal/optimise/parameter_space.hpp"
 #include "internal.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include <cmath>
@@ -11,7 +13,6 @@
 namespace demcal::optimise {
 
 using detail::fail;
-using detail::fmt;
 
 std::string to_string(ParameterSpec::Scale scale) {
   return scale == ParameterSpec::Scale::log10 ? "log10" : "linear";
@@ -97,7 +98,7 @@ Eigen::VectorXd ParameterSpace::to_unit(const Eigen::VectorXd& physical) const {
     } else if (x == p.upper) {
       u[k] = 1.0;
     } else if (p.scale == ParameterSpec::Scale::log10) {
-      if (!(x > 0.0)) fail("to_unit: parameter '" + p.name + "' has value " + fmt(x) + " on a log10 scale");
+      if (!(x > 0.0)) fail("to_unit: parameter '" + p.name + "' has value " + format_number(x, round_trip_digits) + " on a log10 scale");
       const double a = std::log10(p.lower), b = std::log10(p.upper);
       u[k] = (std::log10(x) - a) / (b - a);
     } else {
@@ -132,16 +133,20 @@ void ParameterSpace::Validate() const {
   };
   for (const auto& p : free_) {
     claim(p.name, "free");
-    if (!std::isfinite(p.lower)) fail("parameter '" + p.name + "': lower bound " + fmt(p.lower) + " is not finite");
-    if (!std::isfinite(p.upper)) fail("parameter '" + p.name + "': upper bound " + fmt(p.upper) + " is not finite");
+    if (!std::isfinite(p.lower))
+      fail("parameter '" + p.name + "': lower bound " + format_number(p.lower, round_trip_digits) + " is not finite");
+    if (!std::isfinite(p.upper))
+      fail("parameter '" + p.name + "': upper bound " + format_number(p.upper, round_trip_digits) + " is not finite");
     if (!(p.lower < p.upper))
-      fail("parameter '" + p.name + "': lower bound " + fmt(p.lower) + " is not below upper bound " + fmt(p.upper));
+      fail("parameter '" + p.name + "': lower bound " + format_number(p.lower, round_trip_digits) + " is not below upper bound " +
+           format_number(p.upper, round_trip_digits));
     if (p.scale == ParameterSpec::Scale::log10 && !(p.lower > 0.0))
-      fail("parameter '" + p.name + "': lower bound " + fmt(p.lower) + " must be > 0 on a log10 scale");
+      fail("parameter '" + p.name + "': lower bound " + format_number(p.lower, round_trip_digits) + " must be > 0 on a log10 scale");
   }
   for (const auto& [name, value] : fixed_) {
     claim(name, "fixed");
-    if (!std::isfinite(value)) fail("fixed parameter '" + name + "': value " + fmt(value) + " is not finite");
+    if (!std::isfinite(value))
+      fail("fixed parameter '" + name + "': value " + format_number(value, round_trip_digits) + " is not finite");
   }
   if (tied_) {
     claim(tied_->name, "tied");
@@ -151,7 +156,7 @@ void ParameterSpace::Validate() const {
     if (!source_found)
       fail("tied parameter '" + tied_->name + "': source '" + tied_->source + "' is neither a free nor a fixed parameter");
     if (!std::isfinite(tied_->ratio) || !(tied_->ratio > 0.0))
-      fail("tied parameter '" + tied_->name + "': ratio " + fmt(tied_->ratio) + " must be finite and > 0");
+      fail("tied parameter '" + tied_->name + "': ratio " + format_number(tied_->ratio, round_trip_digits) + " must be finite and > 0");
   }
 }
 

@@ -3,6 +3,8 @@
 
 #include "internal.hpp"
 
+#include "demcal/common/random.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>

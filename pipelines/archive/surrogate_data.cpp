@@ -1,10 +1,10 @@
 #include "demcal/pipelines/surrogate_data.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <algorithm>
 #include <cmath>
-#include <iomanip>
 #include <map>
-#include <sstream>
 #include <stdexcept>
 
 using nlohmann::json;
@@ -121,11 +121,6 @@ double curve_fitness(const Eigen::VectorXd& outputs, const std::vector<std::shar
 }
 
 std::string outside_space(const optimise::ParameterSpace& space, const std::map<std::string, double>& params) {
-  const auto text = [](double v) {
-    std::ostringstream out;
-    out << std::setprecision(6) << v;
-    return out.str();
-  };
   const auto& free = space.free_parameters();
   const auto& fixed = space.fixed_parameters();
   const auto& tied = space.tied_parameter();
@@ -133,8 +128,8 @@ std::string outside_space(const optimise::ParameterSpace& space, const std::map<
     const auto it = params.find(p.name);
     if (it == params.end()) return "no value for the campaign's parameter '" + p.name + "'";
     if (!(it->second >= p.lower && it->second <= p.upper))
-      return p.name + " = " + text(it->second) + " lies outside the campaign's bounds [" + text(p.lower) + ", " +
-             text(p.upper) + "]";
+      return p.name + " = " + format_number(it->second, 6) + " lies outside the campaign's bounds [" + format_number(p.lower, 6) +
+             ", " + format_number(p.upper, 6) + "]";
   }
   for (const auto& [name, value] : params) {
     const bool known = fixed.count(name) || (tied && tied->name == name) ||
@@ -144,13 +139,14 @@ std::string outside_space(const optimise::ParameterSpace& space, const std::map<
   for (const auto& [name, value] : fixed) {
     const auto it = params.find(name);
     if (it == params.end()) return "no value for the campaign's fixed parameter '" + name + "'";
-    if (!same(it->second, value)) return name + " = " + text(it->second) + ", but the campaign fixes it at " + text(value);
+    if (!same(it->second, value))
+      return name + " = " + format_number(it->second, 6) + ", but the campaign fixes it at " + format_number(value, 6);
   }
   if (tied) {
     const auto it = params.find(tied->name);
     const auto source = params.find(tied->source);
     if (it == params.end() || source == params.end() || !same(it->second, source->second / tied->ratio))
-      return tied->name + " is not " + tied->source + " / " + text(tied->ratio) + ", as the campaign ties it";
+      return tied->name + " is not " + tied->source + " / " + format_number(tied->ratio, 6) + ", as the campaign ties it";
   }
   return "";
 }

@@ -1,5 +1,6 @@
 #include "demcal/pipelines/backend.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/dem/simulation.hpp"
 #include "demcal/pipelines/archive.hpp"
 #include "demcal/pipelines/process.hpp"
@@ -262,9 +263,7 @@ std::string locate_non_finite(const std::string& path, size_t column, size_t col
     while (!cell.empty() && cell.back() == '\r') cell.pop_back();
     return "line " + std::to_string(number) + ", column '" + name + "': non-finite value '" + cell + "'";
   }
-  char buffer[48];
-  std::snprintf(buffer, sizeof buffer, "%g", value);
-  return "data row " + std::to_string(row + 1) + ", column '" + name + "': non-finite value '" + buffer + "'";
+  return "data row " + std::to_string(row + 1) + ", column '" + name + "': non-finite value '" + format_number(value, 6) + "'";
 }
 }  // namespace
 
@@ -287,11 +286,7 @@ SimulationOutcome CommandBackend::run_one(const SimulationTask& task) const {
                                             {"scene", options_.scene_files.size() > task.case_index
                                                           ? options_.scene_files[task.case_index]
                                                           : std::string()}};
-  for (const auto& [name, value] : task.params) {
-    char buffer[40];
-    std::snprintf(buffer, sizeof buffer, "%.17g", value);
-    values[name] = buffer;
-  }
+  for (const auto& [name, value] : task.params) values[name] = format_number(value, round_trip_digits);
   ProcessOptions process;
   try {
     process.argv = expand_placeholders(words_, values);

@@ -1,5 +1,7 @@
 #include "demcal/pipelines/process.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <dirent.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -412,9 +414,8 @@ void describe_outcome(const ProcessOptions& options, const SupervisorReport& hea
   }
   if (m.kind == kKilled) {
     result.status = heard.cancelled ? ProcessStatus::cancelled : ProcessStatus::timed_out;
-    char buffer[96];
-    std::snprintf(buffer, sizeof buffer, "killed after the %g s timeout", options.timeout_s);
-    result.message = heard.cancelled ? "killed: campaign cancelled" : buffer;
+    result.message = heard.cancelled ? "killed: campaign cancelled"
+                                     : "killed after the " + format_number(options.timeout_s, 6) + " s timeout";
     return;
   }
   const int wait_status = m.value;

@@ -1,11 +1,11 @@
 #include "demcal/pipelines/archive.hpp"
 #include "demcal/pipelines/campaign.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/dem/generators.hpp"
 #include "demcal/limits/limits.hpp"
 
 #include <cmath>
-#include <cstdio>
 #include <type_traits>
 #include <filesystem>
 #include <fstream>
@@ -22,12 +22,6 @@ namespace {
 std::string describe(const json& value) {
   std::string text = value.dump();
   return text.size() > 60 ? text.substr(0, 60) + "..." : text;
-}
-
-std::string number_text(double value) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "%g", value);
-  return buffer;
 }
 
 // What a field of type T holds, for messages.
@@ -387,14 +381,14 @@ void CampaignConfig::Validate() const {
   if (backend.type == "command" && backend.command.empty())
     throw CampaignError(source + ": backend.command: the command backend needs a command template");
   if (!(backend.timeout_s >= 0))
-    throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + number_text(backend.timeout_s));
+    throw CampaignError(source + ": backend.timeout_s: must be >= 0, got " + format_number(backend.timeout_s, 6));
   for (const auto& [key, workers] : {std::pair{"backend.threads", backend.threads}, {"backend.parallel", backend.parallel},
                                      {"backend.fitness_threads", backend.fitness_threads}})
     if (auto m = limits::check(limits::Limit::workers, workers))
       throw CampaignError(source + ": " + key + ": " + *m);
   if (!(backend.max_output_mb > 0) || !(backend.max_output_mb <= 1048576))
     throw CampaignError(source + ": backend.max_output_mb: must be > 0 and <= 1048576 (1 TiB), got " +
-                        number_text(backend.max_output_mb));
+                        format_number(backend.max_output_mb, 6));
   if (polish.enabled) {
     try {
       polish.options.Validate();

@@ -1,5 +1,7 @@
 #include "demcal/pipelines/progress.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <unistd.h>
 
 #include <cmath>
@@ -17,9 +19,7 @@ std::string format_duration(double seconds) {
 }
 
 std::string format_progress(const ProgressState& st) {
-  char best[32];
-  if (std::isfinite(st.best)) std::snprintf(best, sizeof best, "%.6g", st.best);
-  else std::snprintf(best, sizeof best, "-");
+  const std::string best = format_number(st.best, {.significant_digits = 6, .non_finite = "-"});
   std::string left = "?";
   if (st.done_this_session > 0 && st.total >= st.done) {
     const double per_simulation = st.elapsed_s / static_cast<double>(st.done_this_session);
@@ -33,7 +33,7 @@ std::string format_progress(const ProgressState& st) {
     std::snprintf(iteration, sizeof iteration, "%d", st.iteration);
   char line[320];
   std::snprintf(line, sizeof line, "iteration %s  simulations %ld/%ld  best %s  elapsed %s (simulations %s, model %s)  left %s",
-                iteration, st.done, st.total, best, format_duration(st.elapsed_s).c_str(),
+                iteration, st.done, st.total, best.c_str(), format_duration(st.elapsed_s).c_str(),
                 format_duration(st.simulation_s).c_str(), format_duration(st.model_s).c_str(), left.c_str());
   return line;
 }

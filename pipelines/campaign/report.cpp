@@ -1,11 +1,11 @@
 #include "demcal/pipelines/report.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/pipelines/process.hpp"
 #include "demcal/pipelines/version.hpp"
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -67,17 +67,18 @@ std::string run_gnuplot(const std::string& script, const std::string& png_path) 
 
 namespace {
 
-std::string fmt(double value, const char* format = "%.6g") {
-  if (!std::isfinite(value)) return "-";
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, format, value);
-  return buffer;
-}
+// Numbers in tables and gnuplot scripts; NaN and +/-inf are "-".
+constexpr NumberFormat six_digits{.significant_digits = 6, .non_finite = "-"};
+constexpr NumberFormat ten_digits{.significant_digits = 10, .non_finite = "-"};
+constexpr NumberFormat one_decimal{.fixed_decimals = 1, .non_finite = "-"};
+constexpr NumberFormat two_decimals{.fixed_decimals = 2, .non_finite = "-"};
+constexpr NumberFormat three_decimals{.fixed_decimals = 3, .non_finite = "-"};
+constexpr NumberFormat six_decimals{.fixed_decimals = 6, .non_finite = "-"};
 
 std::string datablock(const std::string& name, const std::vector<std::vector<double>>& rows) {
   std::string text = "$" + name + " << EOD\n";
   for (const auto& row : rows) {
-    for (size_t i = 0; i < row.size(); ++i) text += (i ? " " : "") + fmt(row[i], "%.10g");
+    for (size_t i = 0; i < row.size(); ++i) text += (i ? " " : "") + format_number(row[i], ten_digits);
     text += "\n";
   }
   return text + "EOD\n";
@@ -86,7 +87,7 @@ std::string datablock(const std::string& name, const std::vector<std::vector<dou
 // Value shown in tables: stiffnesses in GPa/m, friction in degrees, others as they are.
 std::string table_value(const std::string& name, double value) {
   const bool stiffness = name == "kn" || name == "ks" || name.ends_with(".kn") || name.ends_with(".ks");
-  return stiffness ? fmt(value / 1e9, "%.3f") : fmt(value, "%.2f");
+  return stiffness ? format_number(value / 1e9, three_decimals) : format_number(value, two_decimals);
 }
 std::string table_header(const std::string& name) {
   const bool stiffness = name == "kn" || name == "ks" || name.ends_with(".kn") || name.ends_with(".ks");
@@ -170,7 +171,7 @@ std::string colour_bar_tics(const std::vector<std::vector<double>>& rows) {
   std::string tics;
   for (double decade = std::pow(10.0, std::floor(std::log10(lo))); decade <= hi; decade *= 10)
     for (double m : {1.0, 2.0, 5.0})
-      if (m * decade >= lo && m * decade <= hi) tics += (tics.empty() ? "" : ", ") + fmt(m * decade, "%g");
+      if (m * decade >= lo && m * decade <= hi) tics += (tics.empty() ? "" : ", ") + format_number(m * decade, six_digits);
   return tics.empty() ? "" : "set cbtics (" + tics + ")\n";
 }
 
@@ -198,8 +199,10 @@ std::vector<Figure> parameter_space_figures(const ReportInputs& in, const std::s
       }
       std::string script = datablock("all", all) + datablock("top", top);
       script += "set xlabel '" + table_header(free[a].name) + "'\nset ylabel '" + table_header(free[b].name) + "'\n";
-      script += "set xrange [" + fmt(scaled(free[a].name, free[a].lower)) + ":" + fmt(scaled(free[a].name, free[a].upper)) + "]\n";
-      script += "set yrange [" + fmt(scaled(free[b].name, free[b].lower)) + ":" + fmt(scaled(free[b].name, free[b].upper)) + "]\n";
+      script += "set xrange [" + format_number(scaled(free[a].name, free[a].lower), six_digits) + ":" +
+                format_number(scaled(free[a].name, free[a].upper), six_digits) + "]\n";
+      script += "set yrange [" + format_number(scaled(free[b].name, free[b].lower), six_digits) + ":" +
+                format_number(scaled(free[b].name, free[b].upper), six_digits) + "]\n";
       if (free[a].scale == optimise::ParameterSpec::Scale::log10) script += "set logscale x\n";
       if (free[b].scale == optimise::ParameterSpec::Scale::log10) script += "set logscale y\n";
       script += colour_bar_tics(all);
@@ -236,10 +239,11 @@ Figure failure_figure(const ReportInputs& in, size_t k, const std::string& out_d
     for (size_t i = 0; i <= b["vertices"].size(); ++i) {
       const auto& v = b["vertices"][i % b["vertices"].size()];
       if (i < b["vertices"].size()) vs.push_back({v[0].get<double>(), v[1].get<double>()});
-      poly += (i ? " to " : "") + fmt(v[0].get<double>(), "%.6f") + "," + fmt(v[1].get<double>(), "%.6f");
+      poly += (i ? " to " : "") + format_number(v[0].get<double>(), six_decimals) + "," +
+              format_number(v[1].get<double>(), six_decimals);
     }
     poly += b["fixed"].get<bool>() ? " fc rgb '#bbbbbb' fs solid 0.6 border lc rgb '#333333'\n"
-                                   : " fc palette cb " + fmt(magnitude, "%.6f") + " fs solid 1.0 border lc rgb '#333333'\n";
+                                   : " fc palette cb " + format_number(magnitude, six_decimals) + " fs solid 1.0 border lc rgb '#333333'\n";
     objects += poly;
   }
   // A joint's marker: the mean of the closest vertex pairs of its two blocks.
@@ -281,9 +285,9 @@ Figure failure_figure(const ReportInputs& in, size_t k, const std::string& out_d
   if (hinges.empty()) hinges.push_back({NAN, NAN});
   if (sliding.empty()) sliding.push_back({NAN, NAN});
   std::string script = datablock("hinges", hinges) + datablock("sliding", sliding) + datablock("extent", extent);
-  script += "set size ratio -1\nset xrange [" + fmt(xmin - pad) + ":" + fmt(xmax + pad) + "]\nset yrange [" +
-            fmt(ymin - pad) + ":" + fmt(ymax + pad) + "]\n";
-  script += "set cbrange [0:" + fmt(std::max(max_disp, 1e-6)) + "]\nset cblabel 'displacement (mm)'\n"
+  script += "set size ratio -1\nset xrange [" + format_number(xmin - pad, six_digits) + ":" + format_number(xmax + pad, six_digits) +
+            "]\nset yrange [" + format_number(ymin - pad, six_digits) + ":" + format_number(ymax + pad, six_digits) + "]\n";
+  script += "set cbrange [0:" + format_number(std::max(max_disp, 1e-6), six_digits) + "]\nset cblabel 'displacement (mm)'\n"
             "set palette rgb 33,13,10\nset xlabel 'x (m)'\nset ylabel 'y (m)'\nset key top left\n";
   script += objects;
   script += "plot $extent using 1:2:(0) with points pt 0 lc palette notitle, "
@@ -307,8 +311,8 @@ void write_summary(std::ostream& md, const ReportInputs& in) {
 void write_best_parameters(std::ostream& md, const ReportInputs& in) {
   const auto& result = *in.result;
   md << "## Best parameters\n\n| parameter | value |\n| --- | --- |\n";
-  for (const auto& [name, value] : result.best.params) md << "| " << name << " | " << fmt(value) << " |\n";
-  md << "| fitness | " << fmt(result.best.fitness) << " |\n\n";
+  for (const auto& [name, value] : result.best.params) md << "| " << name << " | " << format_number(value, six_digits) << " |\n";
+  md << "| fitness | " << format_number(result.best.fitness, six_digits) << " |\n\n";
   md << "Units: kn, ks in Pa/m, friction_deg in degrees; fitness in N (sum over channels of the root of the "
         "summed squared force differences at " << in.config->objective_options.points << " points).\n\n";
 }
@@ -346,7 +350,7 @@ void write_five_best(std::ostream& md, const ReportInputs& in) {
     md << "| " << (i == 0 ? config.optimiser.algorithm : "") << " | " << (i == 0 ? std::to_string(result.iterations) : "")
        << " | " << i + 1 << " |";
     for (const auto& name : free) md << " " << table_value(name, result.top[i].params.at(name)) << " |";
-    md << " " << fmt(result.top[i].fitness, "%.1f") << " |\n";
+    md << " " << format_number(result.top[i].fitness, one_decimal) << " |\n";
   }
 }
 
@@ -373,7 +377,7 @@ void write_failed_runs(std::ostream& md, const std::vector<ReportInputs::Failure
   for (size_t i = 0; i < failures.size() && i < kListed; ++i) {
     const auto& f = failures[i];
     std::string params, reason = f.reason;
-    for (const auto& [name, value] : f.params) params += (params.empty() ? "" : ", ") + name + " " + fmt(value);
+    for (const auto& [name, value] : f.params) params += (params.empty() ? "" : ", ") + name + " " + format_number(value, six_digits);
     for (auto& c : reason)
       if (c == '|' || c == '\n') c = '/';
     md << "| " << f.iteration << " | " << f.position << " | " << f.case_name << " | " << params << " | " << f.status
@@ -392,7 +396,7 @@ void write_surrogate_model(std::ostream& md, const ReportInputs& in) {
              : std::string(" (Gaussian process on the fitness, ARD Matern-5/2, fitted nugget)"))
      << "; acquisition " << surrogate::to_string(config.surrogate.options.acquisition) << ". "
      << (mlp ? "5-fold" : "Leave-one-out") << " relative error of the final model: "
-     << (std::isfinite(result.surrogate_cv_error) ? fmt(result.surrogate_cv_error, "%.3f") : std::string("n/a"))
+     << (std::isfinite(result.surrogate_cv_error) ? format_number(result.surrogate_cv_error, three_decimals) : std::string("n/a"))
      << " (0 = exact, 1 = no better than the mean).\n\n";
 }
 
@@ -403,7 +407,7 @@ void write_screened_iterations(std::ostream& md, const CampaignResult& result) {
   for (const auto& it : result.surrogate_iterations) {
     md << "| " << it.at("iteration").get<int>() + 1 << " | " << it.value("training_rows", 0L) << " | "
        << it.at("pool").get<long>() << " | " << it.at("simulated").get<long>() << " | "
-       << (it.at("mean_relative_error").is_number() ? fmt(it.at("mean_relative_error").get<double>(), "%.3f")
+       << (it.at("mean_relative_error").is_number() ? format_number(it.at("mean_relative_error").get<double>(), three_decimals)
                                                     : std::string("n/a"))
        << " |\n";
   }
@@ -420,8 +424,8 @@ void write_screened_out_candidates(std::ostream& md, const ReportInputs& in) {
       const auto x = c.at("x").get<std::vector<double>>();
       for (size_t k = 0; k < free.size() && k < x.size(); ++k)
         md << (k ? ", " : "") << free[k] << " " << table_value(free[k], x[k]);
-      md << " | " << fmt(c.at("predicted_fitness").get<double>(), "%.1f") << " | "
-         << fmt(c.at("failure_probability").get<double>(), "%.2f") << " |\n";
+      md << " | " << format_number(c.at("predicted_fitness").get<double>(), one_decimal) << " | "
+         << format_number(c.at("failure_probability").get<double>(), two_decimals) << " |\n";
     }
   md << "\n";
 }

@@ -1,12 +1,12 @@
 #include "demcal/pipelines/study.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/limits/limits.hpp"
 #include "demcal/pipelines/report.hpp"
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -44,12 +44,12 @@ std::string header_of(const std::string& name) {
 }
 double display_value(const std::string& name, double v) { return is_stiffness(name) ? v / 1e9 : v; }
 
-std::string format(const char* pattern, double v) {
-  if (!std::isfinite(v)) return "-";
-  char b[64];
-  std::snprintf(b, sizeof b, pattern, v);
-  return b;
-}
+// Numbers in tables and gnuplot scripts; NaN and +/-inf are "-".
+constexpr NumberFormat three_digits{.significant_digits = 3, .non_finite = "-"};
+constexpr NumberFormat six_digits{.significant_digits = 6, .non_finite = "-"};
+constexpr NumberFormat ten_digits{.significant_digits = 10, .non_finite = "-"};
+constexpr NumberFormat one_decimal{.fixed_decimals = 1, .non_finite = "-"};
+constexpr NumberFormat two_decimals{.fixed_decimals = 2, .non_finite = "-"};
 
 json statistics_json(const FitnessStatistics& s) {
   return {{"count", s.count}, {"mean", s.mean}, {"stddev", s.stddev}, {"median", s.median}, {"min", s.min}, {"max", s.max}};
@@ -230,14 +230,14 @@ void write_five_best_row(std::ostream& md, const StudyConfig& config, const Stud
   md << "| " << (rank == 0 ? r.method.label : "") << " | " << (rank == 0 ? std::to_string(r.method.iterations) : "")
      << " | " << rank + 1 << " |";
   for (const auto& p : free) {
-    const char* pattern = is_stiffness(p.name) ? "%.3g" : "%.2f";
-    md << " " << (c.best.params.count(p.name) ? format(pattern, display_value(p.name, c.best.params.at(p.name))) : "-")
+    const NumberFormat& shown = is_stiffness(p.name) ? three_digits : two_decimals;
+    md << " " << (c.best.params.count(p.name) ? format_number(display_value(p.name, c.best.params.at(p.name)), shown) : "-")
        << " |";
   }
   const auto hit = std::find(c.best_history.begin(), c.best_history.end(), c.best.fitness);
   const long found = static_cast<long>(hit - c.best_history.begin()) + 1;
   const long cases = static_cast<long>(config.campaign.cases.size());
-  md << " " << format("%.1f", c.best.fitness) << " | " << c.seed << " | "
+  md << " " << format_number(c.best.fitness, one_decimal) << " | " << c.seed << " | "
      << (std::isfinite(c.best.fitness) ? std::to_string(found * cases) : "-") << " |\n";
 }
 
@@ -256,8 +256,8 @@ void write_five_best(std::ostream& md, const StudyConfig& config, const StudyRes
 
 // "mean | std | median | min | max" of a table row.
 std::string statistics_cells(const FitnessStatistics& s) {
-  return format("%.1f", s.mean) + " | " + format("%.1f", s.stddev) + " | " + format("%.1f", s.median) + " | " +
-         format("%.1f", s.min) + " | " + format("%.1f", s.max);
+  return format_number(s.mean, one_decimal) + " | " + format_number(s.stddev, one_decimal) + " | " + format_number(s.median, one_decimal) + " | " +
+         format_number(s.min, one_decimal) + " | " + format_number(s.max, one_decimal);
 }
 
 void write_fitness_tables(std::ostream& md, const StudyResult& result) {
@@ -280,7 +280,7 @@ void write_simulations_used(std::ostream& md, const StudyResult& result) {
     long simulated = 0;
     for (const auto& c : r.campaigns) simulated += c.simulated;
     md << "| " << r.method.label << " | " << r.simulations_per_campaign << " | " << r.simulations_total << " | "
-       << simulated << " | " << format("%.1f", r.wall_time_s) << " |\n";
+       << simulated << " | " << format_number(r.wall_time_s, one_decimal) << " |\n";
   }
 }
 
@@ -308,7 +308,7 @@ std::string mean_best_datablock(const StudyMethodResult& r, size_t m, size_t cas
       if (i < c.best_history.size() && std::isfinite(c.best_history[i])) sum += c.best_history[i], ++count;
     if (count == 0) continue;
     if (sum <= 0) positive = false;
-    block += std::to_string((i + 1) * cases) + " " + format("%.10g", sum / count) + "\n";
+    block += std::to_string((i + 1) * cases) + " " + format_number(sum / count, ten_digits) + "\n";
   }
   return block + "EOD\n";
 }
@@ -332,8 +332,8 @@ void write_convergence_figure(std::ostream& md, const StudyConfig& config, const
 
 // "set xrange [lower:upper]" over a parameter's range, in display units.
 std::string axis_range(char axis, const ParameterSpec& p) {
-  return std::string("set ") + axis + "range [" + format("%.10g", display_value(p.name, p.lower)) + ":" +
-         format("%.10g", display_value(p.name, p.upper)) + "]\n";
+  return std::string("set ") + axis + "range [" + format_number(display_value(p.name, p.lower), ten_digits) + ":" +
+         format_number(display_value(p.name, p.upper), ten_digits) + "]\n";
 }
 
 // The per-seed best sets of every method, `x` against `y`; returns the figure's markdown.
@@ -345,8 +345,8 @@ std::string positions_figure(const StudyConfig& config, const StudyResult& resul
     s += "$m" + std::to_string(m) + " << EOD\n";
     for (const auto& c : result.methods[m].campaigns)
       if (std::isfinite(c.best.fitness))
-        s += format("%.10g", display_value(x.name, c.best.params.at(x.name))) + " " +
-             format("%.10g", display_value(y.name, c.best.params.at(y.name))) + "\n";
+        s += format_number(display_value(x.name, c.best.params.at(x.name)), ten_digits) + " " +
+             format_number(display_value(y.name, c.best.params.at(y.name)), ten_digits) + "\n";
     s += "EOD\n";
     p += std::string(m ? ", " : "") + "$m" + std::to_string(m) + " using 1:2 with points pt " + std::to_string(5 + 2 * (m % 4)) +
          " ps 1.6 lc rgb '" + colours[m % 8] + "' title '" + result.methods[m].method.label + "'";
@@ -428,8 +428,8 @@ StudyResult run_study(const StudyConfig& config, bool progress) {
       r.simulations_total += sc.simulations;
       r.wall_time_s += sc.wall_time_s;
       if (progress)
-        std::cerr << r.method.label << " seed " << seed << ": best " << format("%.6g", sc.best.fitness) << " ("
-                  << sc.simulations << " simulations, " << sc.simulated << " new, " << format("%.1f", sc.wall_time_s)
+        std::cerr << r.method.label << " seed " << seed << ": best " << format_number(sc.best.fitness, six_digits) << " ("
+                  << sc.simulations << " simulations, " << sc.simulated << " new, " << format_number(sc.wall_time_s, one_decimal)
                   << " s)" << (sc.status == CampaignStatus::completed ? "" : " FAILED: " + sc.message) << "\n";
       r.campaigns.push_back(std::move(sc));
     }

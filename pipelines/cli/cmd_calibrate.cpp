@@ -2,11 +2,11 @@
 // flags, or both (flags override the file).
 #include "command_registry.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/pipelines/campaign.hpp"
 #include "demcal/pipelines/mpi.hpp"
 
 #include <cmath>
-#include <cstdio>
 #include <iostream>
 #include <memory>
 
@@ -79,9 +79,7 @@ demcal::pipelines::CampaignConfig build_config(const CalibrateFlags& f) {
   }
   if (f.timeout_given) {
     if (!(f.timeout >= 0) || !std::isfinite(f.timeout)) {
-      char text[32];
-      std::snprintf(text, sizeof text, "%g", f.timeout);
-      throw CampaignError(std::string("--timeout ") + text + ": must be a number of seconds >= 0 (0 = none)");
+      throw CampaignError("--timeout " + demcal::format_number(f.timeout, 6) + ": must be a number of seconds >= 0 (0 = none)");
     }
     c.backend.timeout_s = f.timeout;
   }

@@ -3,12 +3,13 @@
 // the LibTorch plugin (plugin/libtorch_training.cpp); what both share is in training_common.cpp.
 #include "mlp_training.hpp"
 
+#include "demcal/common/format.hpp"
+#include "demcal/common/random.hpp"
 #include "demcal/limits/limits.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <numeric>
-#include <sstream>
 #include <stdexcept>
 
 namespace demcal::smoothing {
@@ -16,23 +17,6 @@ namespace demcal::smoothing {
 namespace {
 
 using detail::LayerShape;
-
-// Portable uniform doubles in [0, 1) from a 64-bit seed (splitmix64), so initial weights do not
-// depend on the standard library's distributions.
-class SplitMix {
- public:
-  explicit SplitMix(std::uint64_t seed) : state_(seed) {}
-  double uniform() {
-    std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ULL);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    z ^= z >> 31;
-    return static_cast<double>(z >> 11) * 0x1.0p-53;
-  }
-
- private:
-  std::uint64_t state_;
-};
 
 void set_architecture(const SmootherOptions& o, detail::TrainingBatch* tb) {
   std::int64_t offset = 0, in = 1;
@@ -45,13 +29,13 @@ void set_architecture(const SmootherOptions& o, detail::TrainingBatch* tb) {
   tb->parameter_count = offset;
   // Glorot-uniform weights (suited to tanh; the first layer widened), zero biases.
   tb->initial_parameters.assign(static_cast<std::size_t>(offset), 0.0f);
-  SplitMix rng(o.seed);
+  SplitMix64 rng(o.seed);
   for (std::size_t l = 0; l < tb->layers.size(); ++l) {
     const auto& s = tb->layers[l];
     const double a = (l == 0 ? o.first_layer_gain : 1.0) * std::sqrt(6.0 / static_cast<double>(s.in + s.out));
     for (std::int64_t i = 0; i < s.in * s.out; ++i)
       tb->initial_parameters[static_cast<std::size_t>(s.weight_offset + i)] =
-          static_cast<float>((2 * rng.uniform() - 1) * a);
+          static_cast<float>((2 * uniform01(rng) - 1) * a);
   }
 }
 
@@ -88,9 +72,7 @@ SmootherBackend parse_smoother_backend(const std::string& name) {
 
 void SmootherOptions::Validate() const {
   auto fail = [](const std::string& field, double value, const std::string& rule) {
-    std::ostringstream s;
-    s << "SmootherOptions." << field << " = " << value << ": " << rule;
-    throw std::invalid_argument(s.str());
+    throw std::invalid_argument("SmootherOptions." + field + " = " + format_number(value, 6) + ": " + rule);
   };
   if (points < 4) fail("points", points, "must be >= 4");
   if (hidden_layers < 1) fail("hidden_layers", hidden_layers, "must be >= 1");

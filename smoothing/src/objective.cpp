@@ -1,13 +1,13 @@
 // Loading envelope, interpolation, objective functions 1 and 2.
 #include "demcal/smoothing/objective.hpp"
 
+#include "demcal/common/format.hpp"
 #include "demcal/limits/limits.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 
 namespace demcal::smoothing {
@@ -18,13 +18,6 @@ std::string join(const std::vector<std::string>& names) {
   std::string out;
   for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
   return out.empty() ? "none" : out;
-}
-
-std::string fmt(double v) {
-  std::ostringstream s;
-  s.precision(10);
-  s << v;
-  return s.str();
 }
 
 }  // namespace
@@ -44,7 +37,7 @@ void ObjectiveOptions::Validate() const {
   if (force_column.empty()) throw std::invalid_argument("ObjectiveOptions.force_column is empty");
   for (const auto& [name, w] : channel_weights)
     if (!(w >= 0) || !std::isfinite(w))
-      throw std::invalid_argument("ObjectiveOptions.channel_weights['" + name + "'] = " + fmt(w) +
+      throw std::invalid_argument("ObjectiveOptions.channel_weights['" + name + "'] = " + format_number(w, 10) +
                                   ": must be finite and >= 0");
   for (const auto& name : ignored_columns)
     if (name == force_column)
@@ -112,8 +105,9 @@ std::pair<double, double> objective_window(const XYSeries& e, const XYSeries& s,
   const double lower = common ? std::max(e.x.front(), s.x.front()) : e.x.front();
   const double upper = common ? std::min(e.x.back(), s.x.back()) : e.x.back();
   if (!(upper > lower))
-    throw CurveError(label + ": displacement ranges do not overlap (experiment [" + fmt(e.x.front()) + ", " +
-                     fmt(e.x.back()) + "], simulation [" + fmt(s.x.front()) + ", " + fmt(s.x.back()) + "])");
+    throw CurveError(label + ": displacement ranges do not overlap (experiment [" + format_number(e.x.front(), 10) + ", " +
+                     format_number(e.x.back(), 10) + "], simulation [" + format_number(s.x.front(), 10) + ", " +
+                     format_number(s.x.back(), 10) + "])");
   return {lower, upper};
 }
 

@@ -2,6 +2,9 @@
 #include "demcal/surrogate/surrogate.hpp"
 #include "internal.hpp"
 
+#include "demcal/common/format.hpp"
+#include "demcal/common/random.hpp"
+
 #include <nlopt.h>
 
 #include <algorithm>
@@ -9,7 +12,6 @@
 #include <cmath>
 #include <numeric>
 #include <random>
-#include <sstream>
 #include <stdexcept>
 #include <thread>
 
@@ -17,15 +19,12 @@ namespace demcal::surrogate {
 
 namespace {
 
-using detail::mix;
 using detail::vector_from;
 using detail::vector_json;
 
 // The cost-aware batch grows at most this many times. Measured on the arch (docs/benchmarks.md,
 // "Surrogate wall time"): 4 x lost 5 % of median fitness against 2 x for 25 % less model time.
 constexpr int kMaxBatchFactor = 2;
-
-double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 
 // The acquisition of a batch's next point: the model's score, shifted to be >= 0 over the searched
 // points, times a factor 1 − exp(−|x − p|² / (2 r²)) for every point p already in the batch (local
@@ -62,7 +61,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     const long wanted = std::max<long>(surrogate_.min_runs, options.population);
     const long design = std::max<long>(warm_finite >= surrogate_.min_runs ? 0 : 2, wanted - warm_finite);
     // Latin hypercube: one point per stratum of every coordinate, strata permuted per coordinate.
-    std::mt19937_64 rng(mix(options.seed));
+    std::mt19937_64 rng = seeded_rng(options.seed);
     design_ = Eigen::MatrixXd(design, d);
     for (int k = 0; k < d; ++k) {
       std::vector<long> perm(static_cast<size_t>(design));
@@ -225,7 +224,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     replay_fits();
     const auto start = std::chrono::steady_clock::now();
     const int d = space_.dimension();
-    std::mt19937_64 rng(mix(mix(options_.seed) ^ static_cast<std::uint64_t>(iteration_ + 1)));
+    std::mt19937_64 rng = seeded_rng(options_.seed, iteration_ + 1);
     Eigen::VectorXd random_point(d);
     for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
     const auto rows = rows_until(told_x_.size());
@@ -251,10 +250,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     for (size_t r = 0; r < std::min<size_t>(5, order.size()); ++r)
       for (int c = 0; c < 20; ++c) {
         Eigen::VectorXd u = rows[order[r]].unit;
-        for (int k = 0; k < d; ++k) {
-          const double u1 = std::max(uniform01(rng), 0x1.0p-53), u2 = uniform01(rng);
-          u[k] += 0.05 * std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
-        }
+        for (int k = 0; k < d; ++k) u[k] += normal(rng, 0.05);
         searched.push_back(u.cwiseMax(0.0).cwiseMin(1.0));
       }
     const std::vector<double> score = score_all(searched);
@@ -310,11 +306,9 @@ class BayesOptimiser final : public optimise::Optimiser {
     if (!(simulation > 0)) return;
     const double ratio = model_seconds / (surrogate_.cost_ratio * simulation);
     const int factor = static_cast<int>(std::clamp(std::ceil(ratio), 1.0, static_cast<double>(kMaxBatchFactor)));
-    std::ostringstream reason;
-    reason.precision(3);
-    reason << (factor > 1 ? "batches of " + std::to_string(batch_ * factor) : std::string("batches kept")) << ": a proposal round took "
-           << model_seconds << " s of model time, a simulation " << simulation << " s";
-    batch_reason_ = reason.str();
+    batch_reason_ = (factor > 1 ? "batches of " + std::to_string(batch_ * factor) : std::string("batches kept")) +
+                    ": a proposal round took " + format_number(model_seconds, 3) + " s of model time, a simulation " +
+                    format_number(simulation, 3) + " s";
     batch_ *= factor;
   }
 

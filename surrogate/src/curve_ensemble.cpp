@@ -1,6 +1,8 @@
 #include "demcal/surrogate/curve_ensemble.hpp"
 #include "internal.hpp"
 
+#include "demcal/common/format.hpp"
+#include "demcal/common/random.hpp"
 #include "demcal/smoothing/regression_ensemble.hpp"
 
 #include <cmath>
@@ -10,16 +12,6 @@
 namespace demcal::surrogate {
 
 namespace {
-
-// The next value of a splitmix64 stream.
-std::uint64_t splitmix(std::uint64_t& state) {
-  const std::uint64_t value = detail::mix(state);
-  state += 0x9e3779b97f4a7c15ULL;
-  return value;
-}
-double uniform01(std::uint64_t& state) { return static_cast<double>(splitmix(state) >> 11) * 0x1.0p-53; }
-
-using detail::format_number;
 
 nlohmann::json matrix_json(const Eigen::MatrixXd& m) {
   nlohmann::json rows = nlohmann::json::array();
@@ -51,13 +43,16 @@ void MlpOptions::Validate() const {
   if (hidden_layers < 1) fail("hidden_layers = " + std::to_string(hidden_layers) + " must be >= 1");
   if (hidden_width < 1) fail("hidden_width = " + std::to_string(hidden_width) + " must be >= 1");
   if (epochs < 1) fail("epochs = " + std::to_string(epochs) + " must be >= 1");
-  if (!(learning_rate > 0) || !std::isfinite(learning_rate)) fail("learning_rate = " + format_number(learning_rate) + " must be > 0");
+  if (!(learning_rate > 0) || !std::isfinite(learning_rate))
+    fail("learning_rate = " + format_number(learning_rate, round_trip_digits) + " must be > 0");
   if (!(final_learning_rate > 0) || final_learning_rate > learning_rate)
-    fail("final_learning_rate = " + format_number(final_learning_rate) + " must be in (0, learning_rate]");
-  if (!(weight_decay >= 0) || !std::isfinite(weight_decay)) fail("weight_decay = " + format_number(weight_decay) + " must be >= 0");
+    fail("final_learning_rate = " + format_number(final_learning_rate, round_trip_digits) + " must be in (0, learning_rate]");
+  if (!(weight_decay >= 0) || !std::isfinite(weight_decay))
+    fail("weight_decay = " + format_number(weight_decay, round_trip_digits) + " must be >= 0");
   if (refit_epochs < 1) fail("refit_epochs = " + std::to_string(refit_epochs) + " must be >= 1");
   if (!(refit_learning_rate >= final_learning_rate) || !(refit_learning_rate <= learning_rate))
-    fail("refit_learning_rate = " + format_number(refit_learning_rate) + " must be in [final_learning_rate, learning_rate]");
+    fail("refit_learning_rate = " + format_number(refit_learning_rate, round_trip_digits) +
+         " must be in [final_learning_rate, learning_rate]");
   limits::require_within(limits::Limit::epochs, epochs, "surrogate mlp.epochs");
   limits::require_within(limits::Limit::epochs, refit_epochs, "surrogate mlp.refit_epochs");
   limits::require_within(limits::Limit::network_weights, 1.0 * members * hidden_layers * hidden_width * hidden_width,
@@ -106,9 +101,10 @@ float poisson_weight(std::uint64_t seed, int member, const Eigen::VectorXd& unit
     std::uint64_t bits;
     const double v = unit[k];
     std::memcpy(&bits, &v, sizeof bits);
-    state = detail::mix(state ^ bits);
+    state = mix_seed(state ^ bits);
   }
-  const double u = uniform01(state);
+  SplitMix64 rng(state);
+  const double u = uniform01(rng);
   double p = std::exp(-1.0), cumulative = p;
   int count = 0;
   while (u > cumulative && count < 20) cumulative += (p /= ++count);
@@ -187,13 +183,13 @@ bool CurveEnsemble::fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, cons
   }
   smoothing::RegressionBatch batch = training_batch(X, Y, options);
   for (int member = 0; member < options.members; ++member) {
-    std::uint64_t state = options.seed * 0x2545f4914f6cdd1dULL + static_cast<std::uint64_t>(member);
+    SplitMix64 rng(options.seed * 0x2545f4914f6cdd1dULL + static_cast<std::uint64_t>(member));
     // Glorot-uniform weights, zero biases, in the flat layout W0, b0, W1, b1, ...
     std::int64_t in = d;
     for (int l = 0; l <= options.hidden_layers; ++l) {
       const std::int64_t out = l < options.hidden_layers ? options.hidden_width : m;
       const double limit = std::sqrt(6.0 / static_cast<double>(in + out));
-      for (std::int64_t w = 0; w < in * out; ++w) batch.initial_parameters.push_back(static_cast<float>(limit * (2 * uniform01(state) - 1)));
+      for (std::int64_t w = 0; w < in * out; ++w) batch.initial_parameters.push_back(static_cast<float>(limit * (2 * uniform01(rng) - 1)));
       batch.initial_parameters.insert(batch.initial_parameters.end(), static_cast<size_t>(out), 0.0f);
       in = out;
     }

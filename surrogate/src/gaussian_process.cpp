@@ -1,6 +1,9 @@
 #include "demcal/surrogate/gaussian_process.hpp"
 #include "internal.hpp"
 
+#include "demcal/common/format.hpp"
+#include "demcal/common/random.hpp"
+
 #include <Eigen/Cholesky>
 #include <nlopt.h>
 
@@ -18,10 +21,6 @@ namespace {
 constexpr double kSqrt5 = 2.23606797749978969641;
 constexpr double kJitter = 1e-10;        // added to the diagonal on top of the nugget
 constexpr double kMinSignal = 1e-2, kMaxSignal = 1e2;  // standardised signal variance bounds
-
-using detail::format_number;
-
-double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 
 // Correlation matrix of the rows of X and the per-pair scaled squared differences are recomputed
 // per likelihood evaluation; n stays in the hundreds, so this is cheap next to one simulation.
@@ -160,10 +159,12 @@ void GpOptions::Validate() const {
     throw std::invalid_argument("gp option max_iterations = " + std::to_string(max_iterations) + " must be >= 10");
   limits::require_within(limits::Limit::iterations, 1.0 * restarts * max_iterations, "gp options restarts x max_iterations");
   if (!(min_length > 0) || !(max_length > min_length) || !std::isfinite(max_length))
-    throw std::invalid_argument("gp options min_length = " + format_number(min_length) + ", max_length = " + format_number(max_length) +
+    throw std::invalid_argument("gp options min_length = " + format_number(min_length, round_trip_digits) +
+                                ", max_length = " + format_number(max_length, round_trip_digits) +
                                 " must satisfy 0 < min_length < max_length");
   if (!(min_noise > 0) || !(max_noise > min_noise) || !std::isfinite(max_noise))
-    throw std::invalid_argument("gp options min_noise = " + format_number(min_noise) + ", max_noise = " + format_number(max_noise) +
+    throw std::invalid_argument("gp options min_noise = " + format_number(min_noise, round_trip_digits) +
+                                ", max_noise = " + format_number(max_noise, round_trip_digits) +
                                 " must satisfy 0 < min_noise < max_noise");
 }
 
@@ -268,7 +269,7 @@ void GaussianProcess::condition(const Eigen::MatrixXd& X, const Eigen::VectorXd&
   if (X.rows() != y.size()) throw std::invalid_argument("gaussian process: X and y sizes differ");
   for (Eigen::Index i = 0; i < y.size(); ++i)
     if (!std::isfinite(y[i]) || (log_ && !(y[i] > 0)))
-      throw std::invalid_argument("gaussian process: training value " + format_number(y[i]) + " is not usable" +
+      throw std::invalid_argument("gaussian process: training value " + format_number(y[i], round_trip_digits) + " is not usable" +
                                   (log_ ? " by a log-transformed model" : ""));
   X_ = X;
   y_ = y;
@@ -407,7 +408,8 @@ double matern52(const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen:
 double normal_pdf(double u) { return std::exp(-0.5 * u * u) / std::sqrt(2.0 * M_PI); }
 double normal_cdf(double u) { return 0.5 * std::erfc(-u / std::sqrt(2.0)); }
 double normal_quantile(double p) {
-  if (!(p > 0 && p < 1)) throw std::invalid_argument("normal_quantile: p = " + format_number(p) + " must lie in (0, 1)");
+  if (!(p > 0 && p < 1))
+    throw std::invalid_argument("normal_quantile: p = " + format_number(p, round_trip_digits) + " must lie in (0, 1)");
   double lo = -40, hi = 40;
   for (int i = 0; i < 200 && hi - lo > 1e-14; ++i) {
     const double mid = 0.5 * (lo + hi);

@@ -1,5 +1,5 @@
-// Private to the surrogate module: what its sources share (number text, JSON of vectors, the
-// splitmix64 mixer, reading an options struct).
+// Private to the surrogate module: what its sources share (JSON of vectors, the held-out relative
+// error, reading an options struct).
 #pragma once
 
 #include "demcal/limits/limits.hpp"
@@ -8,22 +8,12 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
-#include <cstdint>
 #include <numeric>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 namespace demcal::surrogate::detail {
-
-// A double as text that reads back to the same value (error messages).
-inline std::string format_number(double v) {
-  std::ostringstream out;
-  out.precision(17);
-  out << v;
-  return out.str();
-}
 
 inline nlohmann::json vector_json(const Eigen::VectorXd& v) {
   return std::vector<double>(v.data(), v.data() + v.size());
@@ -32,14 +22,6 @@ inline nlohmann::json vector_json(const Eigen::VectorXd& v) {
 inline Eigen::VectorXd vector_from(const nlohmann::json& j) {
   const auto v = j.get<std::vector<double>>();
   return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
-}
-
-// splitmix64's finaliser of z + the golden-ratio increment: seeds derived from seeds.
-inline std::uint64_t mix(std::uint64_t z) {
-  z += 0x9e3779b97f4a7c15ULL;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
 }
 
 // Held-out relative error: mean |ŷ − y| / mean |y − mean(y)| from the absolute errors and the

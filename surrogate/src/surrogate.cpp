@@ -1,6 +1,8 @@
 #include "demcal/surrogate/surrogate.hpp"
 #include "internal.hpp"
 
+#include "demcal/common/format.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -12,7 +14,6 @@ namespace {
 
 using detail::vector_from;
 using detail::vector_json;
-using detail::format_number;
 
 void split_rows(const std::vector<TrainingRow>& rows, Eigen::MatrixXd& X, Eigen::VectorXd& y) {
   long finite = 0;
@@ -119,15 +120,18 @@ void SurrogateOptions::Validate() const {
   if (pool_factor < 1) throw std::invalid_argument("surrogate pool_factor = " + std::to_string(pool_factor) + " must be >= 1");
   if (k < 0) throw std::invalid_argument("surrogate k = " + std::to_string(k) + " must be >= 0 (0 = the whole batch)");
   if (!(lcb_kappa >= 0) || !std::isfinite(lcb_kappa))
-    throw std::invalid_argument("surrogate lcb_kappa = " + format_number(lcb_kappa) + " must be finite and >= 0");
+    throw std::invalid_argument("surrogate lcb_kappa = " + format_number(lcb_kappa, round_trip_digits) + " must be finite and >= 0");
   if (min_runs < 3) throw std::invalid_argument("surrogate min_runs = " + std::to_string(min_runs) + " must be >= 3");
   if (max_training_runs < 10)
     throw std::invalid_argument("surrogate max_training_runs = " + std::to_string(max_training_runs) + " must be >= 10");
   if (batch < 0) throw std::invalid_argument("surrogate batch = " + std::to_string(batch) + " must be >= 0 (0 = the backend's workers)");
   if (!(refit_growth >= 1) || !std::isfinite(refit_growth))
-    throw std::invalid_argument("surrogate refit_growth = " + format_number(refit_growth) + " must be finite and >= 1");
+    throw std::invalid_argument("surrogate refit_growth = " + format_number(refit_growth, round_trip_digits) +
+                                " must be finite and >= 1");
   if (threads < 1) throw std::invalid_argument("surrogate threads = " + std::to_string(threads) + " must be >= 1");
-  if (!(cost_ratio > 0)) throw std::invalid_argument("surrogate cost_ratio = " + format_number(cost_ratio) + " must be > 0 (infinity: never adapt)");
+  if (!(cost_ratio > 0))
+    throw std::invalid_argument("surrogate cost_ratio = " + format_number(cost_ratio, round_trip_digits) +
+                                " must be > 0 (infinity: never adapt)");
   limits::require_within(limits::Limit::training_rows, max_training_runs, "surrogate max_training_runs");
   limits::require_within(limits::Limit::population, batch, "surrogate batch");
   limits::require_within(limits::Limit::training_rows, min_runs, "surrogate min_runs");
