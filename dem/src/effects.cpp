@@ -1,4 +1,5 @@
 #include "demcal/dem/effects.hpp"
+#include "effect_definitions.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -9,68 +10,16 @@ namespace demcal::dem {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
-
 std::vector<Effect> build_registry() {
-  using P = EffectParameter;
-  std::vector<Effect> r;
-  r.push_back({"joint-closure",
-               "rough joints stiffen as they close (Bandis-Barton hyperbola); kn is the initial stiffness",
-               EffectTarget::joint_groups,
-               {P{"closure_max", "m", "maximum closure of the joint (asymptote of the hyperbola)", 0, 0.01, 1e-5, 1e-3,
-                  true, 1e-4}}});
-  r.push_back({"friction-softening",
-               "friction falls linearly with accumulated slip from its peak to a residual value",
-               EffectTarget::joint_groups,
-               // The residual as the loss from the peak: friction_deg - friction_loss_deg stays a valid
-               // residual whatever friction a calibration tries beside it.
-               {P{"friction_loss_deg", "deg", "friction angle lost from the peak to the residual, at most friction_deg",
-                  0, 90, 0.5, 25, false, 5},
-                P{"slip_softening", "m", "slip over which friction falls to the residual", 0, kInf, 2e-4, 1e-2, true,
-                  2e-3}}});
-  r.push_back({"cohesion",
-               "a bond at the joints present at the start with cohesion and tensile strength, brittle, then Coulomb",
-               EffectTarget::joint_groups,
-               {P{"cohesion", "Pa", "cohesion of the bond (shear limit c A + tan(phi) Fn)", 0, 1e8, 1e3, 1e6, true,
-                  1e5},
-                P{"tensile_strength", "Pa", "tensile strength of the bond", 0, 1e8, 1e3, 1e6, true, 5e4}}});
-  // The compressive strength is searched over two decades around the largest contact stress of a
-  // run of the plain model: from 0.03 x (the reference arch then keeps a fifth of its peak load) to
-  // 3 x, since a base fit that absorbs a cap with weaker joints reaches lower stresses than the
-  // structure (reference arch with a 0.5 MPa cap: base fit 0.35 MPa, the true joints uncapped 0.83).
-  P strength{"compressive_strength", "Pa", "largest normal stress at a contact point", 0, 1e9, 1e6, 5e7, true, 1e7};
-  strength.search_scale = SearchScale::peak_normal_stress;
-  strength.scaled_min = 0.03;
-  strength.scaled_max = 3.0;
-  // 10 mm of softening is the range's nearest to a perfectly plastic cap (the scene's 0).
-  P softening{"crushing_softening", "m", "plastic closure over which the strength falls to zero (0: none)", 0,
-              kInf, 1e-4, 1e-2, true, 1e-3};
-  softening.simplest_form_at_max = true;
-  r.push_back({"crushing-cap",
-               "compressive strength at the contact points with softening after it (toe crushing)",
-               EffectTarget::joint_groups,
-               {strength, softening}});
-  r.push_back({"support-compliance",
-               "a support (abutment, base) on elastic springs instead of rigid",
-               EffectTarget::support_blocks,
-               {P{"support_kx", "N/m", "horizontal spring of the support", 0, kInf, 1e6, 1e10, true, 1e8},
-                P{"support_ky", "N/m", "vertical spring of the support", 0, kInf, 1e6, 1e10, true, 1e8},
-                P{"support_kr", "N m/rad", "rotational spring of the support about its centroid", 0, kInf, 1e5, 1e9,
-                  true, 1e7}}});
-  r.push_back({"joint-gap",
-               "an initial opening at one joint, uniform or wedge-shaped (imperfect fit, lost mortar)",
-               EffectTarget::joint,
-               // As the wider end's opening and a taper (JointGap): a wedge closed at one end, the
-               // likelier imperfection, lies inside the taper's range (beyond +-1), not on its face.
-               {P{"gap_opening", "m", "opening at the wider end of the joint", 0, JointGap::kMaxOpening, 0, 3e-3, false,
-                  5e-4},
-                P{"gap_taper", "1", "share of the opening closed at the other end: 0 uniform, 1 closed at the intrados, "
-                  "-1 at the extrados (beyond 1: 1)", -JointGap::kMaxTaper, JointGap::kMaxTaper, -1.5, 1.5, false, 0}}});
-  r.push_back({"boundary-restraint",
-               "a loading beam neither fixed nor free in rotation: a rotational spring to its start angle",
-               EffectTarget::beam_block,
-               {P{"beam_kr", "N m/rad", "rotational spring of the beam", 0, kInf, 1e4, 1e9, true, 1e6}}});
-  return r;
+  return {effects::joint_closure(),      effects::friction_softening(), effects::cohesion(),
+          effects::crushing_cap(),       effects::support_compliance(), effects::joint_gap(),
+          effects::boundary_restraint()};
+}
+
+// The field of a set_parameter name: "arch_joints.closure_max" -> "closure_max".
+std::string field_of(const std::string& name) {
+  const auto dot = name.rfind('.');
+  return dot == std::string::npos ? name : name.substr(dot + 1);
 }
 
 }  // namespace
@@ -124,16 +73,14 @@ std::vector<std::string> enable_effect(Scene& scene, const std::string& name, co
       for (const auto& g : groups)
         for (const EffectParameter& p : effect.parameters) {
           double value = p.default_value;
-          if (p.name == "friction_loss_deg")
-            value = std::min(value, scene.joint_groups.at(g).friction_angle * 180 / std::numbers::pi);
+          if (!p.capped_by.empty()) value = std::min(value, get_parameter(scene, g + "." + p.capped_by));
           set_parameter(scene, g + "." + p.name, value);
         }
       if (targets.empty()) {
-        // One name per parameter sets every group; the defaults may differ per group only for
-        // the friction loss (lowered to a group's friction angle), so list per group then.
-        const bool per_group = name == "friction-softening" && scene.joint_groups.size() > 1;
+        // One name per parameter sets every group; a capped parameter's default may differ per
+        // group (lowered to each group's cap), so it is listed per group where there are several.
         for (const EffectParameter& p : effect.parameters) {
-          if (per_group && p.name == "friction_loss_deg") {
+          if (!p.capped_by.empty() && scene.joint_groups.size() > 1) {
             for (const auto& g : groups) controls.push_back(g + "." + p.name);
           } else {
             controls.push_back(p.name);
@@ -185,19 +132,23 @@ std::vector<std::string> enable_effect(Scene& scene, const std::string& name, co
   return controls;
 }
 
-bool effect_enabled(const Scene& scene, const std::string& name) {
-  const Effect& effect = find_effect(name);
-  const auto any_group = [&](auto on) {
-    return std::any_of(scene.joint_groups.begin(), scene.joint_groups.end(), [&](const auto& g) { return on(g.second); });
-  };
-  if (name == "joint-closure") return any_group([](const JointMaterial& m) { return m.closure_on(); });
-  if (name == "friction-softening") return any_group([](const JointMaterial& m) { return m.softening_on(); });
-  if (name == "cohesion") return any_group([](const JointMaterial& m) { return m.cohesion_on(); });
-  if (name == "crushing-cap") return any_group([](const JointMaterial& m) { return m.crushing_on(); });
-  if (name == "joint-gap") return scene.joint_gap.on();
-  if (effect.target == EffectTarget::support_blocks)
-    return std::any_of(scene.blocks.begin(), scene.blocks.end(), [](const Block& b) { return b.compliant_support(); });
-  return std::any_of(scene.blocks.begin(), scene.blocks.end(), [](const Block& b) { return !b.fixed && b.beam_kr > 0; });
+bool effect_enabled(const Scene& scene, const std::string& name) { return find_effect(name).enabled(scene); }
+
+std::optional<double> FittedEffect::effect_value(const std::string& field) const {
+  for (const auto& [name, value] : params)
+    if (field_of(name) == field && !base_params.count(name)) return value;
+  return std::nullopt;
+}
+
+std::optional<double> FittedEffect::fitted_value(const std::string& field) const {
+  for (const auto& [name, value] : params)
+    if (field_of(name) == field) return value;
+  return std::nullopt;
+}
+
+std::string describe_fit(const Effect& effect, const FittedEffect& fit) {
+  const std::string sentence = effect.finding ? effect.finding(fit) : "";
+  return sentence.empty() ? "effect " + effect.name : sentence;
 }
 
 }  // namespace demcal::dem

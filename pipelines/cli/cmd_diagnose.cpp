@@ -40,19 +40,20 @@ void run(const DiagnoseFlags& f) {
   const CampaignConfig config = load_campaign(f.campaign_file);
   DiagnoseOptions o = f.options;
   o.effects = split_names(f.effects, "--effects");
-  o.held_out_cases = split_names(f.held_out, "--held-out");
+  o.held_out = split_names(f.held_out, "--held-out");
   o.report = !f.no_report;
-  o.bound_parameters = !f.no_bounds;
+  o.parameter_bounds = !f.no_bounds;
   o.progress = !f.quiet;
   const Diagnosis d = run_diagnosis(config, o);
-  std::cout << d.verdict << "\n";
+  std::cout << d.headline << "\n  - " << d.conclusion << "\n";
+  for (const auto& note : d.notes) std::cout << "  - " << note << "\n";
   std::cout << "error before " << d.error_before << " N, after " << d.error_after << " N; " << d.simulations
             << " simulations";
   if (d.simulated_this_session != d.simulations)
     std::cout << " (" << d.simulated_this_session << " run now, " << d.simulations - d.simulated_this_session
               << " read from the archive)";
   std::cout << "\n";
-  std::cout << "diagnosis: " << o.output << "/diagnosis.json\n";
+  std::cout << "diagnosis: " << o.out << "/diagnosis.json\n";
 }
 
 void setup(CLI::App& app) {
@@ -60,21 +61,21 @@ void setup(CLI::App& app) {
   auto* sub = app.add_subcommand("diagnose", "Trace a calibration's residual to the physical effect the model lacks");
   sub->add_option("campaign", flags->campaign_file, "Campaign JSON file (as for calibrate)")->required()->check(CLI::ExistingFile);
   auto& o = flags->options;
-  sub->add_option("--out", o.output, "Output folder (diagnosis.json, report.md, base/, candidates/)");
+  sub->add_option("--out", o.out, "Output folder (diagnosis.json, report.md, base/, candidates/)");
   sub->add_option("--effects", flags->effects, "all, or effect names separated by commas (joint-closure,friction-softening,...)");
-  sub->add_option("--result", o.base_result, "Reuse a finished base calibration (its folder or result.json)");
+  sub->add_option("--result", o.result, "Reuse a finished base calibration (its folder or result.json)");
   sub->add_option("--held-out", flags->held_out,
                   "Cases of the campaign, separated by commas, left out of every fit and used to check the fits");
-  sub->add_option("--held-out-ratio", o.held_out_reproduced_ratio,
+  sub->add_option("--held-out-ratio", o.held_out_ratio,
                   "Held-out channels check the fits where the base fit's RMS is at most this many times their noise")->capture_default_str();
   sub->add_option("--max-simulations", o.max_simulations, "Budget of the whole diagnosis (0 = the campaign's per calibration)");
   auto* candidates =
-      sub->add_option("--candidates", o.max_candidates, "Effects calibrated at most, best signature first")->capture_default_str();
+      sub->add_option("--candidates", o.candidates, "Effects calibrated at most, best signature first")->capture_default_str();
   auto* at_split = sub->add_option("--candidates-at-split", o.candidates_at_split,
                                    "Effects calibrated at most where the base fit's re-runs scatter by more than the noise "
                                    "(0 = every effect; default: every effect, or --candidates when given)");
-  sub->add_option("--candidate-simulations", o.candidate_evaluations, "Simulations per candidate calibration (0 = the campaign's)");
-  sub->add_option("--continued-simulations", o.continued_evaluations,
+  sub->add_option("--candidate-simulations", o.candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");
+  sub->add_option("--continued-simulations", o.continued_simulations,
                   "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter, "
                   "then, while no fit explains the curves, for each contender (-1 = a candidate's budget, 0 = none)")
       ->capture_default_str();
@@ -83,7 +84,7 @@ void setup(CLI::App& app) {
   sub->add_option("--surrogate-kind", o.surrogate_kind, "Surrogate of the refinement's and candidates' searches: gp | mlp")
       ->capture_default_str()
       ->check(CLI::IsMember({"gp", "mlp"}));
-  sub->add_option("--evidence", o.evidence_threshold, "Criterion fall needed to accept an effect")->capture_default_str();
+  sub->add_option("--evidence", o.evidence, "Criterion fall needed to accept an effect")->capture_default_str();
   sub->add_option("--tie-margin", o.tie_margin,
                   "Effects whose criteria are closer than this are tied (the data cannot tell them apart)")
       ->capture_default_str();
@@ -104,13 +105,16 @@ void setup(CLI::App& app) {
   sub->add_flag("--no-report", flags->no_report, "Skip report.md and figures");
   sub->add_flag("--no-parameter-bounds", flags->no_bounds,
                 "Skip the check of how tightly the data pin an accepted effect's parameters (4 runs each, and re-fits)");
-  sub->add_option("--profile-simulations", o.profile_evaluations,
+  sub->add_option("--profile-simulations", o.profile_simulations,
                   "Runs per re-fit of the other parameters at a value the bounds' check rules out (0 = no re-fit)")
+      ->capture_default_str();
+  sub->add_option("--max-effects", o.max_effects,
+                  "Effects added at most: after one is accepted the model with it is diagnosed again, until none passes (0 = no limit)")
       ->capture_default_str();
   sub->add_flag("--quiet", flags->quiet, "No progress lines");
   sub->callback([flags, candidates, at_split] {
     // an explicit --candidates caps a split base too, unless --candidates-at-split says otherwise
-    if (candidates->count() > 0 && at_split->count() == 0) flags->options.candidates_at_split = flags->options.max_candidates;
+    if (candidates->count() > 0 && at_split->count() == 0) flags->options.candidates_at_split = flags->options.candidates;
     run(*flags);
   });
 }

@@ -1,17 +1,29 @@
-// Shared by the diagnosis's sources (diagnose.cpp, residual.cpp, diagnose_report.cpp).
+// Shared by the diagnosis's sources. run_diagnosis (diagnose.cpp) is a list of stages, one file each:
+//   base_fit.cpp       1. the base calibration and its refinement
+//   base_residual.cpp  2. the base best set's residual, noise and simulation scatter
+//   signatures.cpp     3. each effect probed: how much of the residual it can explain
+//   extension.cpp      4. the extended calibrations, best signature first
+//   selection.cpp      5. the verdict, with further searches where no fit explains the curves
+//   ranges.cpp         6. how tightly the data pin an accepted effect's parameters
+//   notes.cpp          7. the verdict's notes; diagnose_report.cpp: report.md
+// The stages share a DiagnosisRun; case_runner.cpp simulates parameter sets for them, residual.cpp
+// holds the curve arithmetic (pure functions, declared in diagnose.hpp).
 #pragma once
 
+#include "demcal/common/format.hpp"
+#include "demcal/dem/effects.hpp"
 #include "demcal/pipelines/diagnose.hpp"
+#include "demcal/pipelines/predict.hpp"
 
+#include <filesystem>
+#include <map>
 #include <string>
+#include <vector>
 
 namespace demcal::pipelines::detail {
 
-// A number in a verdict or report: `digits` significant digits, shortest form (3 -> "0.000139").
-std::string format_number(double v, int digits = 3);
-
-// The field of a set_parameter name without its group or block: "arch_joints.closure_max" ->
-// "closure_max"; a bare name is its own field.
+// The field of a set_parameter name without its group or block ("<group>.<field>" -> "<field>");
+// a bare name is its own field.
 std::string parameter_field(const std::string& name);
 
 // A residual's simulated_rows and simulated_in_gap from its simulated series and that series's
@@ -24,5 +36,191 @@ std::string file_safe(std::string s);
 
 // report.md and its figures (diagnose_report.cpp).
 void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// ---- runs of parameter sets (case_runner.cpp) ---------------------------------------------------
+
+std::string key_of(const ChannelResidual& c);  // "<case>/<channel>"
+// Root mean square of per-channel values ("<case>/<channel>" -> N), NaN ones left out; 0 when none.
+double overall(const std::map<std::string, double>& per_channel);
+double overall_noise(const std::vector<ChannelResidual>& residuals);  // RMS of the channels' noise, N
+void progress(const DiagnoseOptions& o, const std::string& line);     // a progress line on stderr
+bool is_held_out(const std::string& case_name, const std::vector<std::string>& held_out_cases);
+
+// What one parameter set does to every case: the simulated curves and their residuals.
+struct Evaluation {
+  bool ok = false;
+  std::string message;
+  std::vector<CasePrediction> cases;
+  std::vector<ChannelResidual> residuals;  // per case and channel, on the base grid when one is given
+  std::vector<ChannelResidual> held_out;   // channels of weight 0 and of held-out cases, not fitted
+  double error = Diagnosis::kNaN;
+  double held_out_error = Diagnosis::kNaN;
+};
+
+// Simulates parameter sets on the campaign's cases and counts the runs.
+class CaseRunner {
+ public:
+  CaseRunner(const CampaignConfig& config, const std::vector<std::string>& held_out_cases);
+
+  // Simulates `params` on `config` (the base or an extended model). With `grid` (the base
+  // residuals) the residuals are taken on the same displacements, so fits compare point by point.
+  Evaluation evaluate(const CampaignConfig& config, const std::map<std::string, double>& params,
+                      const std::vector<ChannelResidual>* grid = nullptr);
+
+  // Every run the diagnosis has evaluated, its calibrations' archived ones included, so that the
+  // budget and the count of a resumed diagnosis are those of an uninterrupted one.
+  long simulations() const { return simulations_; }
+  long simulated_this_session() const { return simulated_this_session_; }
+  void add_campaign(const CampaignResult& r);
+  void add_runs_of(const CaseRunner& other);  // another runner's counts and times (a further step's)
+  // This session's seconds waiting for simulations (direct runs and the calibrations') and in the
+  // calibrations' models (surrogate fits and search).
+  double simulation_seconds() const { return simulation_s_; }
+  double model_seconds() const { return model_s_; }
+
+ private:
+  std::map<std::string, smoothing::Curve> measured_;  // by case name
+  std::vector<std::string> held_out_cases_;
+  long simulations_ = 0;
+  long simulated_this_session_ = 0;  // direct runs and the calibrations' runs not read from the archive
+  double simulation_s_ = 0, model_s_ = 0;
+};
+
+// Concatenated residual (or curve difference) over channels, each channel divided by its noise so
+// that channels of different precision weigh alike.
+std::vector<double> stacked(const std::vector<ChannelResidual>& base, const std::vector<ChannelResidual>* other);
+
+// A parameter set's run and its re-runs with every free parameter of `nudge_space` moved by k x 1e-7
+// of itself (k = 1..reruns), each on `grid` (none: the first run's own grid), in that order; failed
+// re-runs are left out, and a failed first run is returned alone.
+std::vector<Evaluation> runs_with_reruns(const CampaignConfig& config, const CampaignConfig& nudge_space,
+                                         const std::map<std::string, double>& params,
+                                         const std::vector<ChannelResidual>* grid, int reruns, CaseRunner& runner);
+// The run of median error (of an even count, the worse middle one): a search keeps the luckiest run
+// it meets, so a fit is judged on the middle of its run and re-runs.
+const Evaluation& median_run(const std::vector<Evaluation>& runs);
+// The simulation's own scatter per channel (into `per_channel`, "<case>/<channel>" -> N) and over
+// all channels (returned; NaN with fewer than two runs).
+double simulation_scatter(const std::vector<Evaluation>& runs, std::map<std::string, double>& per_channel);
+
+// Every calibration of a diagnosis shares one archive, so that the refinement's surrogate starts
+// from the base calibration's runs (same scene hash and objective); the extended models have scene
+// hashes of their own.
+std::string diagnosis_archive(const DiagnoseOptions& options);
+// The campaign without its held-out cases: what every calibration of the diagnosis fits.
+CampaignConfig fitted_cases(CampaignConfig config, const DiagnoseOptions& options);
+
+// ---- extended models (extension.cpp) -----------------------------------------------------------
+
+struct ExtendedModel {
+  CampaignConfig config;
+  std::vector<std::string> parameter_names;                   // set_parameter names of the effect
+  std::vector<dem::EffectParameter> parameters;              // registry entry of each name, range resolved
+  std::string target;
+};
+
+// The base model with `effect` switched on for `targets` in every case's scene (written to folder).
+ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, const std::vector<std::string>& targets,
+                     const dem::ResponseScales& scales, const std::filesystem::path& folder);
+
+// The highest value an effect parameter may take over a base set: the base parameter its registry
+// entry names as its cap (dem::EffectParameter::capped_by), of the same group where the name has
+// one, else of every group; +infinity when it has none.
+double parameter_cap(const std::string& name, const dem::EffectParameter& p, const std::map<std::string, double>& base);
+
+// The campaign that calibrates base + effect (`m`; none: the base alone) from `best`, into `folder`,
+// at most `evaluations` simulations, warm-started at `warm`.
+CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
+                                 const std::map<std::string, double>& best, const DiagnoseOptions& options,
+                                 long evaluations, const std::filesystem::path& folder,
+                                 const std::map<std::string, double>& warm);
+
+// The extended calibration of one candidate: base + its effect into `folder`, at most `budget`
+// simulations, warm-started at `warm`; its best set (into `best_set`, on every case) re-run and the
+// fit judged on the run of median error, since the best of many runs of a model that slips or snaps
+// may be a lucky one. Sets the fit's fields of `c` (its simulations added); false, with `c.reason`,
+// when the best set cannot be re-simulated. Throws what run_campaign throws.
+bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best_set, const ExtendedModel& m,
+                         const CampaignConfig& config, const std::map<std::string, double>& base_params,
+                         const DiagnoseOptions& options, long budget, const std::filesystem::path& folder,
+                         const std::map<std::string, double>& warm, const std::vector<ChannelResidual>& base_residuals,
+                         CaseRunner& runner);
+
+// Whether a signature share comes within `share` of a positive reference share: a signature is a
+// linearisation from a few single runs, so shares that close do not order two targets or effects.
+bool signature_comes_close(double score, double reference, double share);
+
+// ---- selection (selection.cpp) -----------------------------------------------------------------
+
+// Every calibrated candidate's criterion change against the base, all counted with the effective
+// points of common_effective_points over the base and those candidates (kept in the diagnosis);
+// returns them in the order of the base residuals.
+std::vector<double> score_candidates(Diagnosis& d);
+// The diagnosis's error floor (error_floor of its base noise and scatter), N.
+double floor_of(const Diagnosis& d, const DiagnoseOptions& options);
+// The chosen effect when its fit misses the curves by more than the explained level; else null.
+const EffectCandidate* unexplained_chosen(const Diagnosis& d, const DiagnoseOptions& options);
+
+// ---- the stages --------------------------------------------------------------------------------
+
+// A target probed for its signature: the candidate's signature fields, its model, its warm start.
+struct ProbedTarget {
+  EffectCandidate candidate;
+  ExtendedModel model;
+  std::map<std::string, double> warm;
+};
+
+// What the stages of one diagnosis share: run_diagnosis makes it, each stage reads what the stages
+// before it left and adds its own part.
+struct DiagnosisRun {
+  DiagnosisRun(CampaignConfig config, DiagnoseOptions options);
+
+  const CampaignConfig config;    // the base model: the campaign's, or one with effects added
+  const DiagnoseOptions options;
+  CaseRunner runner;
+  Diagnosis d;
+  std::vector<const dem::Effect*> effects;  // the effects considered (DiagnoseOptions::effects)
+  long per_candidate = 0;                   // simulations per candidate calibration
+
+  // 2. the base residual
+  std::map<std::string, double> base_params;  // the base best set, every parameter
+  Evaluation base;                            // its run of median error among it and its re-runs
+  double noise = 0;                           // N, over every fitted channel
+  double scatter = 0;                         // N, the simulation's own (NaN: no re-runs)
+  bool at_noise = false;                      // the base fit is within the noise: nothing to explain
+
+  // 3. signatures
+  std::map<std::string, ExtendedModel> models;                      // effect -> its best-signature extension
+  std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> its best probe's set
+  std::map<std::string, std::vector<ProbedTarget>> close_targets;    // effect -> other targets calibrated too
+
+  // 4-6. calibrations and selection
+  std::map<std::string, std::map<std::string, double>> best_sets;  // effect -> its fit's complete set
+  std::vector<double> effective_points;                            // score_candidates' last count
+
+  // `wanted` simulations, within a total budget: room is left for a best set's run and re-runs.
+  long within_budget(long wanted) const;
+};
+
+void fit_base(DiagnosisRun& run);                      // 1. base_fit.cpp
+void measure_base_residual(DiagnosisRun& run);         // 2. base_residual.cpp
+void probe_signatures(DiagnosisRun& run);              // 3. signatures.cpp
+void calibrate_candidates(DiagnosisRun& run);          // 4. extension.cpp
+void select_and_search_further(DiagnosisRun& run);     // 5. selection.cpp
+void bound_accepted_parameters(DiagnosisRun& run);     // 6. ranges.cpp
+void add_verdict_notes(DiagnosisRun& run);             // 7. notes.cpp
+void add_further_effects(DiagnosisRun& run);           // 8. further_effects.cpp
+// The counts and times of `run` into its diagnosis, then diagnosis.json and report.md in its folder.
+void finish_diagnosis(DiagnosisRun& run, double wall_time_s);
+// Stages 2 to 7 on the base model of `run`, whose base fit is set (stage 1, or a previous step).
+void diagnose_from_base(DiagnosisRun& run);
+// The chosen fit's own parameters, "name ≈ value (lower – upper)" in engineering units, the range
+// from its bounds check where that ran.
+std::string fitted_effect_parameters(const EffectCandidate& c, const Diagnosis& d);
+
+// `note` (a sentence with its leading space, "" = none) appended to the verdict and to its notes;
+// the verdict before the first note is its conclusion.
+void add_note(Diagnosis& d, const std::string& note);
+
 
 }  // namespace demcal::pipelines::detail

@@ -18,7 +18,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string num(double v, int digits = 3) { return std::isfinite(v) ? detail::format_number(v, digits) : "–"; }
+std::string num(double v, int digits = 3) { return std::isfinite(v) ? format_number(v, digits) : "–"; }
 
 std::string listed(const std::vector<double>& values) {
   std::string text;
@@ -61,9 +61,11 @@ std::string detail::file_safe(std::string s) {
   return s;
 }
 
-void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) {
-  const fs::path out_dir = options.output, figures = out_dir / "figures";
-  fs::create_directories(figures);
+namespace {
+
+// The fit the residual figures compare with the base: the chosen effect's, else the best-scoring
+// calibrated candidate's (null: none).
+const EffectCandidate* fit_to_show(const Diagnosis& d) {
   const EffectCandidate* after = nullptr;
   for (const auto& c : d.candidates)
     if (!d.chosen.empty() && c.effect == d.chosen.front()) after = &c;
@@ -72,10 +74,13 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
       if (c.tried && std::isfinite(c.score) && c.residuals.size() == d.base_residuals.size() &&
           (!after || c.score < after->score))
         after = &c;
+  return after;
+}
 
-  std::ostringstream md;
-  md << "# Diagnosis\n\n**" << d.verdict << "**\n\n"
-     << "RMS force error over all channels: " << num(d.error_before) << " N before, " << num(d.error_after)
+void write_verdict_and_base(std::ostream& md, const Diagnosis& d) {
+  md << "# Diagnosis\n\n**" << d.headline << "**\n\n- " << d.conclusion << "\n";
+  for (const auto& note : d.notes) md << "- " << note << "\n";
+  md << "\nRMS force error over all channels: " << num(d.error_before) << " N before, " << num(d.error_after)
      << " N after. Simulations: " << d.simulations;
   if (d.simulated_this_session != d.simulations)
     md << " (" << d.simulated_this_session << " run by this session, the rest read from the archive)";
@@ -86,6 +91,9 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
   if (!d.base_rerun_errors.empty())
     md << "\nRMS force error of the best set and of its re-runs with the parameters moved by 1e-7: "
        << listed(d.base_rerun_errors) << " N; the residual below is that of the run of median error.\n";
+}
+
+void write_base_residual(std::ostream& md, const Diagnosis& d, const EffectCandidate* after, const fs::path& figures) {
   md << "\n## Residual of the base fit (measured − simulated)\n\n"
      << "Noise is estimated from each measured curve alone (local three-point pseudo-residuals, median "
         "absolute deviation). A positive mean means the model is too weak there. Effective points: "
@@ -109,10 +117,13 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
                           "residual-" + detail::file_safe(r.case_name + "-" + r.channel))
        << "\n";
   }
+}
+
+void write_candidates(std::ostream& md, const Diagnosis& d, const DiagnoseOptions& options) {
   md << "## Candidate effects\n\n"
      << "Signature: the share of the residual that the base parameters cannot remove and the effect's own "
         "change of the curves can. Criterion: change of the information criterion against the base fit "
-        "(negative = better; accepted below −" << num(options.evidence_threshold) << "). RMS error: of the "
+        "(negative = better; accepted below −" << num(options.evidence) << "). RMS error: of the "
         "run of median error among the best set and its re-runs with the parameters moved by 1e-7 (all "
         "listed).\n\n"
      << "| effect | target | signature | simulations | RMS error (N) | best and re-runs (N) | on data not fitted (N) "
@@ -122,7 +133,7 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
     const std::string reruns = listed(c.rerun_errors);
     md << "| " << c.effect << " | " << (c.target.empty() ? "–" : c.target) << " | " << num(c.signature_score, 2)
        << " | " << c.simulations << " | " << num(c.error) << " | " << (reruns.empty() ? "–" : reruns) << " | "
-       << num(c.held_out_error) << " | " << num(c.score) << " | " << c.verdict << " | " << c.reason << " |\n";
+       << num(c.held_out_error) << " | " << num(c.score) << " | " << to_string(c.verdict) << " | " << c.reason << " |\n";
   }
   md << "\n";
   std::ostringstream others;
@@ -139,10 +150,13 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
     md << "The criterion counts every fit with the same effective points per channel, those of the fit closest "
           "to the measurement there:" << counts << ".\n\n";
   }
+}
+
+void write_held_out(std::ostream& md, const Diagnosis& d, const DiagnoseOptions& options) {
   if (!d.held_out_rms.empty()) {
     md << "Data not fitted (channels of weight 0, held-out cases) and the base fit's RMS error there. A channel "
           "checks the fits only where the base fit reproduces it (RMS at most "
-       << num(options.held_out_reproduced_ratio, 2)
+       << num(options.held_out_ratio, 2)
        << " x its noise); one the base fit misses is reported, not judged:\n\n"
           "| case / channel | RMS (N) | noise (N) | checks the fits |\n|---|---|---|---|\n";
     for (const auto& [key, rms] : d.held_out_rms) {
@@ -155,6 +169,9 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
     md << "No data was left out of the fits (no channel of weight 0, no `--held-out` case): the fits are not "
           "checked on data they did not use.\n\n";
   }
+}
+
+void write_best_sets(std::ostream& md, const Diagnosis& d, const DiagnoseOptions& options) {
   for (const auto& c : d.candidates) {
     if (!c.tried || c.params.empty()) continue;
     md << "### " << c.effect << ": best set\n\n| parameter | value |\n|---|---|\n";
@@ -179,7 +196,7 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
     if (c.bounds.empty()) continue;
     md << "How tightly the data pin the effect's parameters: each moved from the best set, the other free "
           "parameters re-fitted where the move alone fits worse (marked *); a value is ruled out when the criterion "
-          "still rises by more than " << num(options.evidence_threshold)
+          "still rises by more than " << num(options.evidence)
        << " (the margin an effect needs to be accepted).\n\n| parameter | values tried (criterion change) | bound |\n|---|---|---|\n";
     for (const auto& b : c.bounds) {
       md << "| " << b.name << " | ";
@@ -192,6 +209,19 @@ void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& o
     }
     md << "\n";
   }
+}
+
+}  // namespace
+
+void detail::write_diagnosis_report(const Diagnosis& d, const DiagnoseOptions& options) {
+  const fs::path out_dir = options.out, figures = out_dir / "figures";
+  fs::create_directories(figures);
+  std::ostringstream md;
+  write_verdict_and_base(md, d);
+  write_base_residual(md, d, fit_to_show(d), figures);
+  write_candidates(md, d, options);
+  write_held_out(md, d, options);
+  write_best_sets(md, d, options);
   const fs::path path = out_dir / "report.md";
   std::ofstream out(path);
   out << md.str();

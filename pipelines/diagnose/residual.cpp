@@ -194,6 +194,17 @@ void detail::note_simulated_sampling(ChannelResidual& r, const XYSeries& simulat
       std::count_if(envelope.x.begin(), envelope.x.end(), [&](double x) { return x > r.gap_lower && x < r.gap_upper; }));
 }
 
+ChannelResidual resimulated(const ChannelResidual& base, const smoothing::XYSeries& simulated) {
+  ChannelResidual r = base;
+  const auto envelope = smoothing::loading_envelope(simulated);
+  // on the base's grid, held beyond its reach (a one-point envelope: a gauge that never passed its start)
+  if (envelope.x.empty()) throw smoothing::CurveError("a simulated curve has no loading point");
+  for (std::size_t i = 0; i < r.displacement.size(); ++i) r.simulated[i] = smoothing::interpolate(envelope, r.displacement[i]);
+  complete_residual(r);
+  detail::note_simulated_sampling(r, simulated, envelope);
+  return r;
+}
+
 double ChannelResidual::gap_share() const {
   if (displacement.size() < 2 || !(displacement.back() > displacement.front())) return 0;
   return (gap_upper - gap_lower) / (displacement.back() - displacement.front());
@@ -356,15 +367,8 @@ std::string detail::parameter_field(const std::string& name) {
   return dot == std::string::npos ? name : name.substr(dot + 1);
 }
 
-std::string detail::format_number(double v, int digits) {
-  std::ostringstream s;
-  s.precision(digits);
-  s << v;
-  return s.str();
-}
-
 std::string ParameterBound::describe() const {
-  const auto number = [](double v) { return detail::format_number(v); };
+  const auto number = [](double v) { return format_number(v, 3); };
   // An unbounded side: the farthest value tried there fits as well, or nothing could be tried there.
   auto open_side = [&](bool below) {
     double v = best;

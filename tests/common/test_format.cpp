@@ -2,11 +2,11 @@
 
 #include <gtest/gtest.h>
 
-#include <clocale>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
+#include <locale>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -81,17 +81,20 @@ TEST(FormatNumber, RoundTripDigitsReadBackToTheSameDouble) {
 }
 
 // The text does not follow the process's C locale (a decimal comma there, or digit grouping).
-TEST(FormatNumber, IndependentOfTheCLocale) {
-  const std::string before = std::setlocale(LC_NUMERIC, nullptr);
-  const char* comma_locale = nullptr;
-  for (const char* name : {"de_DE.UTF-8", "de_DE.utf8", "fr_FR.UTF-8", "fr_FR.utf8"})
-    if (std::setlocale(LC_NUMERIC, name)) {
-      comma_locale = name;
-      break;
-    }
-  if (!comma_locale) GTEST_SKIP() << "no locale with a decimal comma is installed";
+// A decimal comma and digit grouping in the program's global C++ locale (what a stream would write)
+// change nothing: the text is the "C" locale's whatever the process sets.
+TEST(FormatNumber, IndependentOfTheGlobalLocale) {
+  struct CommaDecimal : std::numpunct<char> {
+    char do_decimal_point() const override { return ','; }
+    char do_thousands_sep() const override { return '.'; }
+    std::string do_grouping() const override { return "\3"; }
+  };
+  const std::locale before = std::locale::global(std::locale(std::locale::classic(), new CommaDecimal));
+  std::ostringstream stream;
+  stream << 1234.5;
   const std::string significant = format_number(1234.5, 6), fixed = format_number(0.25, {.fixed_decimals = 2});
-  std::setlocale(LC_NUMERIC, before.c_str());
+  std::locale::global(before);
+  EXPECT_EQ(stream.str(), "1.234,5");  // the locale is in force
   EXPECT_EQ(significant, "1234.5");
   EXPECT_EQ(fixed, "0.25");
 }

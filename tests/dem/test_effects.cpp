@@ -621,3 +621,29 @@ TEST(EffectFlags, SceneCommandWritesEveryOption) {
 }
 
 }  // namespace
+
+// Each effect's finding reads its own fitted values (its names, not the base's), and an effect
+// whose fit lacks a value it needs is named as itself rather than described wrongly.
+TEST(EffectRegistry, EveryEffectDescribesItsFitInWords) {
+  for (const Effect& effect : effect_registry()) {
+    FittedEffect fit;
+    fit.base_params = {{"kn", 1e9}, {"friction_deg", 35}};
+    fit.params = fit.base_params;
+    for (const EffectParameter& p : effect.parameters) fit.params["arch_joints." + p.name] = p.default_value;
+    fit.target = "voussoir_9/voussoir_10";
+    const std::string sentence = describe_fit(effect, fit);
+    EXPECT_NE(sentence.rfind("effect ", 0), 0u) << effect.name << ": " << sentence;
+    EXPECT_NE(sentence.find_first_of("0123456789"), std::string::npos) << effect.name << ": " << sentence;
+    ASSERT_FALSE(effect.parameters.empty());
+    EXPECT_EQ(fit.effect_value(effect.parameters.front().name), effect.parameters.front().default_value);
+    fit.base_params["arch_joints." + effect.parameters.front().name] = 0;  // now a base parameter
+    EXPECT_FALSE(fit.effect_value(effect.parameters.front().name)) << effect.name;
+  }
+  const Effect& softening = find_effect("friction-softening");
+  FittedEffect bare;
+  EXPECT_EQ(describe_fit(softening, bare), "effect friction-softening");
+  bare.params = {{"friction_deg", 35}, {"friction_loss_deg", 10}, {"slip_softening", 0.002}};
+  bare.base_params = {{"friction_deg", 35}};
+  EXPECT_EQ(describe_fit(softening, bare),
+            "friction is lost with sliding: its angle falls by about 10° (from 35° to 25°) over 2 mm of slip");
+}

@@ -137,7 +137,7 @@ TEST(Campaign, PredictionRunsTheExternalCommand) {
   EXPECT_EQ(leftovers(), 0);
 
   DiagnoseOptions diagnose;
-  diagnose.output = (dir / "diagnosis").string();
+  diagnose.out = (dir / "diagnosis").string();
   diagnose.progress = false;
   try {
     run_diagnosis(config, diagnose);

@@ -151,7 +151,7 @@ std::vector<Entry> catalogue() {
          return std::vector<std::string>{"diagnose", (dir / "campaign.json").string(), "--out", (dir / "d").string(),
                                          "--candidate-simulations", "2000000000"};
        },
-       {"candidate_evaluations = 2000000000", "evaluations exceed the limit of 10000000"}},
+       {"--candidate-simulations 2000000000", "evaluations exceed the limit of 10000000"}},
       {"study_campaigns",
        [](const fs::path& dir) {
          write_text(dir / "campaign.json", toy_campaign(dir).dump());

@@ -7,6 +7,9 @@
 
 #include "demcal/dem/scene.hpp"
 
+#include <functional>
+#include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,6 +47,10 @@ struct EffectParameter {
   // also search that form, at search_max, along the effect's other parameters (demcal diagnose,
   // pipelines::search_simplest_form), so that a search can start from it.
   bool simplest_form_at_max = false;
+  // The base parameter whose value bounds this one above, as a set_parameter field ("friction_deg"
+  // for friction_loss_deg, whose residual friction_deg - loss stays >= 0); "" = none. Programs
+  // that search the effect beside the base parameters cap its range there, in the same joint group.
+  std::string capped_by;
 };
 
 // The response of a structure, from a run of its model, that scaled search ranges refer to; 0 = unknown.
@@ -65,13 +72,33 @@ enum class EffectTarget {
 };
 std::string to_string(EffectTarget target);
 
+// A fit of an effect, as its finding reads it: the calibrated set of base + effect.
+struct FittedEffect {
+  std::map<std::string, double> params;       // the fit's set_parameter names -> values, base ones included
+  std::map<std::string, double> base_params;  // the base model's, whose names are not the effect's
+  std::string target;                         // what the effect was switched on for ("" = its default)
+  // The first value, in name order, of a field ("closure_max" of "arch_joints.closure_max") among
+  // the effect's own parameters (names not in base_params) / among every fitted parameter.
+  std::optional<double> effect_value(const std::string& field) const;
+  std::optional<double> fitted_value(const std::string& field) const;
+};
+
+// One effect: one file each (dem/src/effect_<name>.cpp) declares all of this, and nothing else in
+// the library or in programs that try effects (demcal diagnose) branches on its name.
 struct Effect {
   std::string name;       // "joint-closure", "friction-softening", "cohesion", "crushing-cap",
                           // "support-compliance", "joint-gap", "boundary-restraint"
   std::string meaning;    // one line of physics
   EffectTarget target = EffectTarget::joint_groups;
   std::vector<EffectParameter> parameters;
+  std::function<bool(const Scene&)> enabled;  // on anywhere in the scene
+  // What a fit means in a structural engineer's words ("the supports yield elastically ...: horizontal
+  // stiffness about 1.1 MN/m ..."); "" when the fit lacks a value the sentence needs.
+  std::function<std::string(const FittedEffect&)> finding;
 };
+
+// The effect's finding for a fit (Effect::finding), or "effect <name>" when it has none.
+std::string describe_fit(const Effect& effect, const FittedEffect& fit);
 
 // Every effect, in a fixed order.
 const std::vector<Effect>& effect_registry();
@@ -82,7 +109,8 @@ const Effect& find_effect(const std::string& name);
 // EffectTarget), and returns the set_parameter names that now control it in this scene, in the
 // order of Effect::parameters (per target): "closure_max" when every group is meant,
 // "arch_joints.closure_max" for one group, "abutment_right.support_kx", "gap_intrados", "beam_kr".
-// A friction residual default above a group's friction angle is lowered to that angle. Throws
+// A default above its cap (EffectParameter::capped_by) in a group is lowered to the group's value
+// of the cap, and the parameter then named per group when the scene has several. Throws
 // SceneError for unknown names or targets, and validates the scene afterwards.
 std::vector<std::string> enable_effect(Scene& scene, const std::string& name,
                                        const std::vector<std::string>& targets = {});

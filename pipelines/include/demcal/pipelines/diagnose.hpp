@@ -22,7 +22,7 @@
 //   5. selection     the change of an information criterion with the effective number of
 //                    independent points (the residual is autocorrelated; one count per channel for
 //                    every fit, common_effective_points): accepted when it falls
-//                    by more than `evidence_threshold`; "no effect needed" when none is accepted or
+//                    by more than `evidence`; "no effect needed" when none is accepted or
 //                    the base residual is already at the noise level; two accepted effects within
 //                    `tie_margin` of each other are "tied", and then none is chosen;
 //   6. bounds        for an accepted or tied effect, how tightly the data pin each of its
@@ -179,7 +179,7 @@ std::vector<std::vector<double>> search_simplest_form(const std::vector<dem::Eff
 // of its search range when linear, within the search range. A tried value is ruled out when the
 // information criterion (as in information_criterion_change, no extra parameter) rises by more than
 // `threshold` over the best, with every other free parameter re-fitted at that value (a profile):
-// the diagnosis uses its evidence_threshold, so the data must prefer the best over a value by as
+// the diagnosis uses its evidence, so the data must prefer the best over a value by as
 // much as they must prefer an effect over the base model. A value is first run with the others at
 // the best (the conditional change); only one that this rules out is re-fitted, since a re-fit can
 // only lower the change. Without the re-fit, parameters that trade off (a softer support against a
@@ -213,110 +213,86 @@ ParameterBound profile_bound(const std::string& name, double best, const std::ve
 
 // ---- the loop ----------------------------------------------------------------------------------
 
+// Options of run_diagnosis, each named as its flag of `demcal diagnose` (docs/commands/diagnose.md
+// has the table; docs/diagnose.md says why each default is what it is). Counts are simulations.
 struct DiagnoseOptions {
-  std::string output = "diagnosis";       // folder: diagnosis.json, report.md, base/, candidates/
-  std::vector<std::string> effects;       // effect names to consider; empty = every registered effect
-  std::string base_result;                // a finished base calibration's folder (its result.json); "" = run one
-  // Budget of the diagnosis's calibrations: the base (at most half, when it runs), the refinement
-  // (at most a quarter of the rest) and the candidates, each cut to what is left; the signature
-  // probes (2P + 2 runs per effect and target, one per base parameter) come on top. 0 = the
-  // campaign's budget for the base and `candidate_evaluations` for each of the others.
+  std::string out = "diagnosis";      // --out: folder of diagnosis.json, report.md, base/, candidates/
+  std::vector<std::string> effects;   // --effects: names to consider; empty = every registered effect
+  std::string result;                 // --result: a finished base calibration (folder or result.json); "" = run one
+  // --max-simulations: budget of the whole diagnosis: the base (at most half, when it runs), the
+  // refinement (at most a quarter of the rest) and the candidates, each cut to what is left; the
+  // signature probes come on top. 0 = the campaign's budget for the base and
+  // `candidate_simulations` for each of the others.
   long max_simulations = 0;
-  int max_candidates = 3;                 // effects calibrated at most, best signature first, >= 1
-  // Effects calibrated at most when the base fit sits where the model's response splits (its re-runs
-  // scatter by more than scatter_floor_ratio x the noise, response_splits). There a signature is the
-  // difference of single runs, each one realisation of the split, and ranks effects by realisation
-  // as much as by shape (measured: joint closure ranked fifth of seven, 12 %, on a measurement its
-  // own calibration then fitted to the noise; docs/journal/diagnose-studies.md). 0 (the default): every effect;
-  // otherwise >= 1, and at least max_candidates.
+  int candidates = 3;                 // --candidates: effects calibrated at most, best signature first, >= 1
+  // --candidates-at-split: effects calibrated at most where the base fit's re-runs scatter by more
+  // than scatter_floor_ratio x the noise (response_splits): there a signature is a difference of
+  // single runs and ranks effects by realisation as much as by shape. 0: every effect; else >= candidates.
   int candidates_at_split = 0;
-  int candidate_evaluations = 0;          // simulations per candidate calibration; 0 = the campaign's
-  // An effect with several possible targets (a joint gap at each hinge, springs at either support)
-  // is calibrated at its best-signature target and also at every other target whose signature
-  // explains at least this share of the best one's; the better fit (lower error) is kept. Measured:
-  // a gap's signature at the joint under the load and at the other hinge can differ by 1 %
-  // (docs/journal/diagnose-studies.md, "A joint gap at two close targets"). In (0, 1]; 1 = the best target only
-  // unless another matches it exactly.
+  int candidate_simulations = 0;      // --candidate-simulations: per candidate calibration; 0 = the campaign's
+  // --close-target-share: an effect with several targets (a gap at each hinge, springs at either
+  // support) is calibrated at its best-signature target and at every other target whose signature
+  // explains at least this share of the best one's; the lower error is kept. In (0, 1].
   double close_target_share = 0.9;
-  // The same for the effects: one ranked below the max_candidates (or candidates_at_split) tried is
-  // calibrated too when its signature explains at least this share of the last tried one's, within
-  // the budget. Measured: the crushing cap ranked fourth at 24.5 % behind friction softening's 26.8 %
-  // on a measurement it explains (docs/journal/diagnose-studies.md, "Close effects at the cut"). In (0, 1]; 1 =
-  // only an exact tie.
+  // --close-candidate-share: an effect ranked below the `candidates` tried is calibrated too when
+  // its signature explains at least this share of the last tried one's. In (0, 1].
   double close_candidate_share = 0.9;
-  double evidence_threshold = 10;         // accept when the criterion falls by more than this, > 0
-  double tie_margin = 6;                  // effects whose criteria are closer than this are tied, >= 0
-  double noise_level_ratio = 1.25;        // base RMS / noise at or below this: nothing to explain, >= 1
-  // Re-runs of the base best with every free parameter moved by k x 1e-7 of itself (k = 1..n): the
-  // simulation's own scatter, since stick-slip events of a block model fall at other moments for
-  // parameter sets that differ by far less than anything physical. It counts with the measurement
-  // noise in the "nothing to explain" test. The base and each tried candidate are judged on the run
-  // of median error among the best set's and these, so that one lucky run does not decide. 0 =
-  // neither, >= 0.
+  double evidence = 10;               // --evidence: accept when the criterion falls by more than this, > 0
+  double tie_margin = 6;              // --tie-margin: effects whose criteria are closer are tied, >= 0
+  double noise_level_ratio = 1.25;    // base RMS / error floor at or below this: nothing to explain, >= 1
+  // --scatter-runs: re-runs of the base best (and of each candidate's best) with every free
+  // parameter moved by k x 1e-7 of itself, k = 1..n: the simulation's own scatter, since stick-slip
+  // events fall at other moments for sets that differ by far less than anything physical. Each fit
+  // is judged on the run of median error. 0 = none.
   int scatter_runs = 2;
-  // The scatter counts in the floor (error_floor) up to this x the measurement noise, > 0
-  // (infinity: all of it). A base fit whose re-runs scatter by more than the noise sits where the
-  // model's response splits (measured: linear joints fitted to joints that stiffen as they close,
-  // kn at the top of its range): that scatter is the point's, not the model's, since the truth
-  // itself reproduces the measurement to about its noise (docs/diagnose.md, step 2). Counted in
-  // full, it would excuse any misfit there.
+  // --scatter-floor-ratio: the scatter counts in the error floor (error_floor) up to this x the
+  // noise, > 0 (infinity: all of it); counted in full, a base fit where the response splits would
+  // excuse any misfit.
   double scatter_floor_ratio = 1;
   // Base parameters in each candidate calibration: log-scaled ones within best x/÷ narrow_log_factor
-  // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range, then clipped to
-  // the campaign's bounds. Both 0 (the default): the campaign's own bounds, since base parameters
-  // that compensate for a missing effect can lie far from where the extended model needs them.
+  // (> 1), linear ones within best ± narrow_linear_share (in (0, 1]) of their range. Both 0 (the
+  // default): the campaign's own bounds, since base parameters that compensate for a missing
+  // effect can lie far from where the extended model needs them.
   double narrow_log_factor = 0;
   double narrow_linear_share = 0;
-  // Optimiser of each candidate calibration (and of the base refinement). "bo" (the default):
-  // Bayesian optimisation on the surrogate, which measured best on friction softening (docs/journal/diagnose-studies.md);
-  // an NLopt local algorithm ("nlopt:LN_SBPLX") starts from the base best with the effect at the
-  // probe closest to the measurement (a warm start; its first step `candidate_initial_step` in
-  // unit-cube lengths, in (0, 0.5]); a swarm ("tbpso", "pso", "ga") searches the box with the
-  // campaign's population and polish.
+  // --candidate-algorithm: optimiser of each candidate calibration and of the base refinement: "bo"
+  // (Bayesian optimisation on the surrogate), "nlopt:NAME" (local, from the base best with the
+  // effect at its best probe; first step `candidate_initial_step` in unit-cube lengths, in
+  // (0, 0.5]) or a swarm ("tbpso", "pso", "ga") over the box.
   std::string candidate_algorithm = "bo";
   double candidate_initial_step = 0.1;
-  // The surrogate kind of the refinement's and the candidates' searches ("gp" | "mlp"), whatever the
-  // campaign's. "mlp" models the curves, so its searches find the narrow valley a change of
-  // mechanism makes in the objective, which "gp", a model of the scalar fitness, misses
-  // (docs/journal/diagnose-studies.md, "At 1 mm/s").
+  // --surrogate-kind: "gp" | "mlp", whatever the campaign's. "mlp" models the curves, so its
+  // searches find the narrow valley a change of mechanism makes in the objective.
   std::string surrogate_kind = "mlp";
-  // Data the fits do not use, to check them: the campaign's cases named here are left out of every
-  // calibration of the diagnosis (at least one case must stay), and channels of weight 0 are not
-  // fitted anyway. Both are simulated with every fit. Those held-out channels that the base fit
-  // reproduces (RMS at most `held_out_reproduced_ratio` x their noise) check the fits: an accepted
-  // effect whose fit makes them worse by more than the larger of their noise and
-  // `held_out_tolerance` x the base fit's error there is rejected, since it explains the fitted
-  // curves by spoiling others. A held-out channel that the base fit misses checks nothing (the
-  // model is already wrong there, for a reason the fitted curves need not share): its error is
-  // reported, not judged.
-  std::vector<std::string> held_out_cases;
-  double held_out_tolerance = 0.1;        // share of the base fit's held-out error, >= 0
-  double held_out_reproduced_ratio = 2;   // base RMS / noise at or below this: a checking channel, >= 1
-  // Check how tightly the data pin each parameter of an accepted or tied effect (ParameterBound):
-  // four runs per effect parameter, and a re-fit of the other free parameters (LN_BOBYQA from the
-  // best, at most `profile_evaluations` runs) for each tried value those runs rule out, nearest
-  // first, within max_simulations. profile_evaluations 0 = no re-fit (the conditional bound), >= 0.
-  bool bound_parameters = true;
-  int profile_evaluations = 20;
-  // Simulations of a further search for each candidate whose fit stays above the floor (its RMS
-  // error above noise_level_ratio x error_floor) where the selection leaves the residual
-  // unexplained: the accepted effect, then, while no fit explains the curves, the contenders
-  // (candidates_to_search_further). The candidates' search with the next seed, whose surrogate
-  // trains on every archived run of the first (ContinuedSearch). Its fit replaces the first when
-  // closer to the measurement on the median of its re-runs, and the selection is made again with
-  // it. An effect's truth can be a narrow valley that one search budget reaches in some noise seeds
-  // only (measured on the arch's beam restraint and joint closure, docs/journal/diagnose-studies.md). -1 (the
-  // default): a candidate's budget; 0: none; within max_simulations (contenders searched all or
-  // none, so that none gets more search than another).
-  long continued_evaluations = -1;
-  bool resume = false;                    // continue the base and candidate campaigns from their archives
-  bool progress = true;                   // progress lines on stderr
-  bool report = true;                     // report.md with figures
-  void Validate() const;                  // throws CampaignError naming the field and value
+  // --held-out: cases left out of every calibration (at least one must stay); channels of weight 0
+  // are not fitted either. Those the base fit reproduces (RMS at most `held_out_ratio` x their
+  // noise, --held-out-ratio) check the fits: an effect whose fit makes them worse by more than the
+  // larger of their noise and `held_out_tolerance` x the base fit's error there is rejected. One
+  // the base fit misses is reported, not judged.
+  std::vector<std::string> held_out;
+  double held_out_tolerance = 0.1;    // share of the base fit's held-out error, >= 0
+  double held_out_ratio = 2;          // --held-out-ratio, >= 1
+  // --no-parameter-bounds sets false: how tightly the data pin each parameter of an accepted or
+  // tied effect (ParameterBound): four runs per parameter, and for each value they rule out a
+  // re-fit of the others of at most `profile_simulations` runs (--profile-simulations; 0 = none).
+  bool parameter_bounds = true;
+  int profile_simulations = 20;
+  // --continued-simulations: a further search (ContinuedSearch) of each fit left above the floor
+  // where the selection leaves the residual unexplained: the accepted effect, then, while no fit
+  // explains the curves, the contenders. -1: a candidate's budget; 0: none.
+  long continued_simulations = -1;
+  // --max-effects: effects added at most. After an effect is accepted the diagnosis starts again
+  // from the model with it (its fit the new base, the other effects the candidates), until no
+  // further effect passes; 0 = no limit, 1 = one effect per diagnosis.
+  int max_effects = 0;
+  bool resume = false;                // --resume: continue the calibrations from their archives
+  bool progress = true;               // --quiet sets false: progress lines on stderr
+  bool report = true;                 // --no-report sets false: report.md with figures
+  void Validate() const;              // throws CampaignError naming the flag and value
 };
 
 // A further search of a candidate whose fit stayed above the error floor
-// (DiagnoseOptions::continued_evaluations, candidates_to_search_further).
+// (DiagnoseOptions::continued_simulations, candidates_to_search_further).
 struct ContinuedSearch {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
@@ -327,6 +303,24 @@ struct ContinuedSearch {
   std::string describe(const std::string& effect) const;  // a sentence for the verdict
   nlohmann::json to_json() const;
 };
+
+// What a diagnosis concluded (Diagnosis::outcome; diagnosis.json writes it by name).
+enum class DiagnosisOutcome {
+  no_effect_needed,  // the base fit is within the noise, or no effect is worth its parameters there
+  missing_effect,    // one effect accepted: Diagnosis::chosen
+  undecided,         // effects tied: the data cannot tell which is missing
+  unexplained,       // the base fit misses by far more than the noise and no effect tried explains it
+};
+std::string to_string(DiagnosisOutcome outcome);  // "no_effect_needed" | "missing_effect" | ...
+
+// What the selection concluded for one candidate effect (diagnosis.json writes it by name).
+enum class CandidateVerdict {
+  not_tried,  // not calibrated: ranked out, over the budget, or nothing to explain
+  accepted,   // its criterion falls by more than the evidence threshold, and no rival ties it
+  rejected,   // short of the criterion, spoils held-out data, or clearly behind an accepted one
+  tied,       // the data cannot tell it from another effect
+};
+std::string to_string(CandidateVerdict verdict);  // "not tried" | "accepted" | "rejected" | "tied"
 
 struct EffectCandidate {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -354,7 +348,7 @@ struct EffectCandidate {
   int effect_parameters = 0;               // parameters the effect adds (the criterion's penalty)
   double score = kNaN;                     // information criterion change against the base (< 0 better),
                                            // with the diagnosis's effective_points
-  std::string verdict = "not tried";       // "accepted" | "rejected" | "tied" | "not tried"
+  CandidateVerdict verdict = CandidateVerdict::not_tried;
   std::string reason;                      // one line: why this verdict
   long simulations = 0;                    // of its calibration, archived runs included
   std::vector<ChannelResidual> residuals;  // of the best extended set
@@ -372,7 +366,7 @@ struct EffectCandidate {
 struct Diagnosis {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-  std::string status = "completed";        // "completed" | "failed"
+  CampaignStatus status = CampaignStatus::completed;  // diagnosis.json: "completed" | "failed"
   std::string message;
   std::map<std::string, double> base_params;
   double base_fitness = kNaN;
@@ -389,8 +383,28 @@ struct Diagnosis {
   // ("base" or an effect): common_effective_points over the base and every calibrated candidate.
   std::map<std::string, double> effective_points;
   std::map<std::string, std::string> effective_points_from;
-  std::vector<std::string> chosen;         // [] = no effect needed (or a tie)
-  std::string verdict;                     // the conclusion in words
+  std::vector<std::string> chosen;         // the effects added, in order; [] = none (no effect needed, a tie)
+  // One entry per effect added: the first from the base model, each further one from the model
+  // with the effects before it (that step's own diagnosis.json and report.md are in `folder`).
+  struct AddedEffect {
+    std::string effect;
+    std::string target;
+    std::string parameters;        // "name ≈ value (range)", as in the headline
+    double error_before = kNaN;    // N, of the model it was added to
+    double error_after = kNaN;     // N, of its fit
+    std::string folder;            // "" for the first (this diagnosis's own folder)
+  };
+  std::vector<AddedEffect> added;
+  DiagnosisOutcome outcome = DiagnosisOutcome::no_effect_needed;
+  // The verdict three ways: `headline`, one sentence a person reads first ("Missing:
+  // support-compliance at abutment_right: support_kx ≈ 1.83 MN/m (1.2–3.1 MN/m); force error 232 ->
+  // 125 N against 44 N of noise."); `conclusion`, the selection's finding in full; `notes`, each
+  // further thing the diagnosis saw (a search continued, bounds, a split response, ...); `verdict`,
+  // the conclusion and the notes as one text.
+  std::string headline;
+  std::string conclusion;
+  std::vector<std::string> notes;
+  std::string verdict;
   long advised_candidate_simulations = 0;  // a longer search the verdict advises (0: none; see
                                            // advised_candidate_simulations())
   double error_before = kNaN;              // RMS force error over all channels, N
@@ -413,7 +427,7 @@ struct Diagnosis {
 };
 
 // The held-out channels ("<case>/<channel>") that check the fits: those the base fit of `diagnosis`
-// reproduces, RMS error at most `options.held_out_reproduced_ratio` x their noise.
+// reproduces, RMS error at most `options.held_out_ratio` x their noise.
 std::vector<std::string> held_out_checks(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // The check on data no fit used, over the held-out channels of held_out_checks().
@@ -442,8 +456,8 @@ std::string narrow_window_note(const Diagnosis& diagnosis);
 // noise (N): the fit sits where the model's response splits. False for a NaN scatter (no re-runs).
 bool response_splits(double scatter, double noise, const DiagnoseOptions& options);
 
-// How many effects step 4 calibrates at most: options.max_candidates, or where the base response
-// splits options.candidates_at_split (0: every effect), never fewer than max_candidates.
+// How many effects step 4 calibrates at most: options.candidates, or where the base response
+// splits options.candidates_at_split (0: every effect), never fewer than candidates.
 int candidates_to_calibrate(bool splits, const DiagnoseOptions& options);
 
 // A sentence for the verdict when the base fit's re-runs scatter by more than
@@ -473,7 +487,7 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 
 // Step 5, the verdict from the tried candidates (their score, error and held-out errors) and the
 // base residuals (their noise): each candidate's verdict and reason, diagnosis.chosen, error_after
-// and verdict. Accepted: criterion change below -evidence_threshold, error below the base's, and
+// and verdict. Accepted: criterion change below -evidence, error below the base's, and
 // the held-out data not spoilt; two accepted within tie_margin are tied, and so are two accepted
 // of which the criterion prefers one and the error the other by more than the noise; one accepted
 // while a candidate short of the criterion fits the curves better by more than the noise: both
@@ -486,13 +500,13 @@ constexpr double kUnexplainedRatio = 2;
 void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // Step 5b, after select_effect: the candidates whose search goes on (DiagnoseOptions::
-// continued_evaluations), by name, in the diagnosis's order; called again after each round.
+// continued_simulations), by name, in the diagnosis's order; called again after each round.
 // - An accepted effect whose fit is above the level at which the loop calls a fit explained
 //   (noise_level_ratio x error_floor): that effect alone.
 // - Then, while no accepted fit is at that level, the contenders above it: the tied candidates
 //   (a tie is undecided however close the base fit is), and, where the base fit misses by more
 //   than kUnexplainedRatio x the floor, those whose criterion falls by more than
-//   evidence_threshold without spoiling held-out data (rejected because their error did not
+//   evidence without spoiling held-out data (rejected because their error did not
 //   fall, or as clearly less good than an accepted fit that itself stayed above the level after
 //   its own further search). Each gets the same further budget, so that no effect wins by search
 //   effort: the truth of an effect can be a valley its first search missed (docs/journal/diagnose-studies.md,
@@ -522,6 +536,11 @@ std::string more_search_note(long advised, long per_candidate);
 // scatter, the scatter counted up to options.scatter_floor_ratio x the noise (a NaN scatter: none).
 // Step 2's "nothing to explain" test and step 5's "No effect found" both measure against it.
 double error_floor(double noise, double scatter, const DiagnoseOptions& options);
+
+// The verdict in one sentence (Diagnosis::headline) from the outcome, the chosen fit with its
+// parameters in engineering units and their bounds where checked, the errors, the noise and the
+// simulation's scatter (NaN: not measured), all N.
+std::string verdict_headline(const Diagnosis& diagnosis, double noise, double scatter);
 
 // Runs the loop on a campaign (the same file `demcal calibrate` takes). Throws CampaignError for
 // bad input found before the first simulation; failed candidate calibrations become "rejected"

@@ -1,0 +1,115 @@
+// Stage 6 of the diagnosis: how tightly the data pin an accepted (or tied) effect's parameters,
+// each moved with the others re-fitted (profile_bound).
+#include "diagnose_internal.hpp"
+
+#include "demcal/optimise/optimiser.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+
+namespace demcal::pipelines::detail {
+
+namespace {
+
+// Values tried for one effect parameter's bound (ParameterBound), inside its search range and, for a
+// residual friction, at most the fit's friction; none equal to the best.
+std::vector<double> bound_trial_values(const dem::EffectParameter& p, double best, double cap) {
+  std::vector<double> values;
+  const double upper = std::min(p.search_max, cap);
+  constexpr double kLogFactors[] = {0.1, 1.0 / 3, 3, 10};
+  constexpr double kLinearShares[] = {-0.3, -0.1, 0.1, 0.3};
+  for (int k = 0; k < 4; ++k) {
+    const double v = p.log_scale ? best * kLogFactors[k] : best + kLinearShares[k] * (p.search_max - p.search_min);
+    const double clipped = std::clamp(v, p.search_min, std::max(upper, p.search_min));
+    if (clipped != best && std::find(values.begin(), values.end(), clipped) == values.end()) values.push_back(clipped);
+  }
+  return values;
+}
+
+// The criterion change of a parameter set against a fit (NaN: a failed run).
+using ChangeAt = std::function<double(const std::map<std::string, double>&)>;
+
+// The other free parameters of `m` re-fitted with `name` held at `value` (LN_BOBYQA from `best`,
+// at most `evaluations` runs): the smallest change, NaN when nothing else is free or every run failed.
+double refitted_change(const ExtendedModel& m, const std::map<std::string, double>& best, const std::string& name,
+                       double value, const ChangeAt& change_at, int evaluations) {
+  const optimise::ParameterSpace& full = m.config.space;
+  optimise::ParameterSpace others;
+  for (const auto& spec : full.free_parameters())
+    if (spec.name != name) others.add(spec);
+  if (others.dimension() == 0) return Diagnosis::kNaN;
+  for (const auto& [fixed_name, fixed_value] : full.fixed_parameters()) others.fix(fixed_name, fixed_value);
+  others.fix(name, value);
+  if (const auto& t = full.tied_parameter()) others.tie(t->name, t->source, t->ratio);
+  Eigen::VectorXd start(others.dimension());
+  const auto names = others.free_names();
+  const Eigen::VectorXd lower = others.lower_bounds(), upper = others.upper_bounds();
+  for (int i = 0; i < others.dimension(); ++i) start[i] = std::clamp(best.at(names[i]), lower[i], upper[i]);
+  optimise::PolishOptions polish;
+  polish.max_evaluations = evaluations;
+  const auto optimiser = optimise::make_polisher(others, start, polish);
+  const auto summary = optimise::minimise(*optimiser, [&](const Eigen::VectorXd& x) {
+    std::map<std::string, double> params = best;
+    for (const auto& [key, v] : others.values(x)) params[key] = v;
+    const double change = change_at(params);
+    return std::isnan(change) ? HUGE_VAL : change;
+  });
+  return std::isfinite(summary.best_value) ? summary.best_value : Diagnosis::kNaN;
+}
+
+// The bounds of every parameter of candidate c's effect (profile_bound: its fit re-simulated on the
+// fitted cases with one parameter moved, the others re-fitted where that one run rules the value
+// out), within the diagnosis's simulation budget.
+void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const std::map<std::string, double>& best,
+                             const std::vector<ChannelResidual>& grid, const std::vector<double>& effective_points,
+                             CaseRunner& runner, const DiagnoseOptions& options) {
+  const CampaignConfig fitted = fitted_cases(m.config, options);
+  const long runs_per_trial = static_cast<long>(fitted.cases.size());
+  const auto within_budget = [&](long runs) {
+    return options.max_simulations <= 0 || runner.simulations() + runs_per_trial * runs <= options.max_simulations;
+  };
+  const ChangeAt change_at = [&](const std::map<std::string, double>& params) {
+    const Evaluation e = runner.evaluate(fitted, params, &grid);
+    return e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : Diagnosis::kNaN;
+  };
+  for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
+    const std::string& name = m.parameter_names[i];
+    if (!best.count(name)) continue;
+    const auto values = bound_trial_values(m.parameters[i], best.at(name), parameter_cap(name, m.parameters[i], best));
+    if (!within_budget(static_cast<long>(values.size()))) return;  // over the budget: the rest stay unchecked
+    const auto conditional = [&](double v) {
+      std::map<std::string, double> params = best;
+      params[name] = v;
+      return change_at(params);
+    };
+    const auto refitted = [&](double v) {
+      if (options.profile_simulations == 0 || !within_budget(options.profile_simulations)) return Diagnosis::kNaN;
+      return refitted_change(m, best, name, v, change_at, options.profile_simulations);
+    };
+    c.bounds.push_back(profile_bound(name, best.at(name), values, conditional, refitted, options.evidence));
+  }
+}
+
+}  // namespace
+
+void bound_accepted_parameters(DiagnosisRun& run) {
+  if (!run.options.parameter_bounds) return;
+  Diagnosis& d = run.d;
+  std::vector<std::string> bounds;  // of the chosen effect, for the verdict
+  for (auto& c : d.candidates) {
+    if (c.verdict != CandidateVerdict::accepted && c.verdict != CandidateVerdict::tied) continue;
+    progress(run.options, "checking how tightly the data pin the parameters of " + c.effect);
+    bound_effect_parameters(c, run.models.at(c.effect), run.best_sets.at(c.effect), run.base.residuals,
+                            run.effective_points, run.runner, run.options);
+    if (c.verdict == CandidateVerdict::accepted)
+      for (const auto& b : c.bounds) bounds.push_back(b.describe());
+  }
+  if (!bounds.empty()) {
+    std::string note = " How tightly the data pin it, each parameter moved with the others re-fitted:";
+    for (std::size_t i = 0; i < bounds.size(); ++i) note += (i ? "; " : " ") + bounds[i];
+    add_note(d, note + ".");
+  }
+}
+
+}  // namespace demcal::pipelines::detail

@@ -1,0 +1,297 @@
+// Stage 3 of the diagnosis: each effect switched on at each of its targets and probed at a few
+// points of its range; its signature is the share of the base residual those runs, taken as
+// linear, explain beyond what the base parameters can (signature_score). The best probe starts the
+// effect's calibration.
+#include "diagnose_internal.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <functional>
+#include <iterator>
+#include <limits>
+
+namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using namespace detail;
+
+namespace {
+
+// Where in its search range each effect parameter is probed for the signature: from strong to mild.
+constexpr double kProbeFractions[] = {0.2, 0.5, 0.8};
+// Golden-section steps of the search of an effect's simplest form (search_simplest_form): from a
+// bracket of half the range to about 3 % of it, within the reference arch's cap valley.
+constexpr int kSimplestFormRefinements = 6;
+
+// A parameter's value at fraction t of its search range (geometric for log-scaled ones).
+double at_fraction(const dem::EffectParameter& p, double t) {
+  if (p.log_scale && p.search_min > 0) return p.search_min * std::pow(p.search_max / p.search_min, t);
+  return p.search_min + t * (p.search_max - p.search_min);
+}
+
+// The effect's parameters at fractions t[i] of their search ranges, over the base set.
+std::map<std::string, double> effect_values(const ExtendedModel& m, const std::map<std::string, double>& base,
+                                            const std::vector<double>& t) {
+  std::map<std::string, double> values = base;
+  for (std::size_t i = 0; i < m.parameter_names.size(); ++i)
+    values[m.parameter_names[i]] = std::min(at_fraction(m.parameters[i], t[i]), parameter_cap(m.parameter_names[i], m.parameters[i], base));
+  return values;
+}
+
+// Probe points of the signature: every parameter at mid-range, then each parameter alone at the
+// strong and mild ends of the probe range with the others at mid-range (one parameter: three
+// points along its range). 2P + 1 runs for P parameters.
+std::vector<std::vector<double>> probe_points(std::size_t parameters) {
+  std::vector<std::vector<double>> points{std::vector<double>(parameters, 0.5)};
+  for (std::size_t i = 0; i < parameters; ++i)
+    for (double t : {kProbeFractions[0], kProbeFractions[2]}) {
+      std::vector<double> p(parameters, 0.5);
+      p[i] = t;
+      points.push_back(p);
+    }
+  return points;
+}
+
+}  // namespace
+
+std::vector<std::vector<double>> search_simplest_form(const std::vector<dem::EffectParameter>& parameters,
+                                                      const std::function<double(const std::vector<double>&)>& error,
+                                                      int refinements) {
+  std::vector<std::vector<double>> run;
+  const auto run_at = [&](std::size_t end, std::size_t j, double t) {
+    std::vector<double> point(parameters.size(), 0.5);
+    point[end] = 1;
+    point[j] = t;
+    run.push_back(point);
+    const double e = error(point);
+    return std::isnan(e) ? std::numeric_limits<double>::infinity() : e;
+  };
+  constexpr double kGolden = 0.38196601125010515;  // (3 - sqrt(5)) / 2
+  for (std::size_t end = 0; end < parameters.size(); ++end) {
+    if (!parameters[end].simplest_form_at_max) continue;
+    for (std::size_t j = 0; j < parameters.size(); ++j) {
+      if (j == end) continue;
+      // the bracket (a, b, c): b the best fraction run so far, a and c the fractions around it
+      double a = 0, b = kProbeFractions[0], c = kProbeFractions[1];
+      double best = run_at(end, j, kProbeFractions[0]);
+      constexpr int probes = static_cast<int>(std::size(kProbeFractions));
+      for (int k = 1; k < probes; ++k) {
+        const double e = run_at(end, j, kProbeFractions[k]);
+        if (e < best) {
+          best = e;
+          a = kProbeFractions[k - 1];
+          b = kProbeFractions[k];
+          c = k + 1 < probes ? kProbeFractions[k + 1] : 1.0;
+        }
+      }
+      for (int step = 0; step < refinements && std::isfinite(best); ++step) {
+        const bool right = c - b > b - a;  // the wider side
+        const double x = right ? b + kGolden * (c - b) : b - kGolden * (b - a);
+        const double e = run_at(end, j, x);
+        if (e < best) {
+          best = e;
+          (right ? a : c) = b;
+          b = x;
+        } else {
+          (right ? c : a) = x;
+        }
+      }
+    }
+  }
+  return run;
+}
+
+namespace detail {
+namespace {
+
+// What the base best run reached, for the structure-relative search ranges: the largest contact
+// stress over the fitted cases, in the run and at its start (0 when a backend does not report them).
+dem::ResponseScales response_scales(const Evaluation& base, const DiagnoseOptions& options) {
+  dem::ResponseScales s;
+  auto largest = [](const json& details, const char* key, double& into) {
+    if (details.contains(key) && details[key].is_number()) into = std::max(into, details[key].get<double>());
+  };
+  for (const auto& c : base.cases)
+    if (!is_held_out(c.name, options.held_out)) {
+      largest(c.details, "max_normal_stress", s.peak_normal_stress);
+      largest(c.details, "start_normal_stress", s.start_normal_stress);
+    }
+  return s;
+}
+
+// Sensitivity of the stacked curves to each free base parameter: one forward difference of 5 % of
+// the unit cube (backwards at the upper bound).
+std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config, const std::map<std::string, double>& best,
+                                                    const std::vector<ChannelResidual>& base, CaseRunner& runner) {
+  std::vector<std::vector<double>> columns;
+  const auto& space = config.space;
+  const auto names = space.free_names();
+  Eigen::VectorXd physical(static_cast<Eigen::Index>(names.size()));
+  for (std::size_t j = 0; j < names.size(); ++j) physical(static_cast<Eigen::Index>(j)) = best.at(names[j]);
+  const Eigen::VectorXd unit = space.to_unit(physical);
+  for (std::size_t j = 0; j < names.size(); ++j) {
+    Eigen::VectorXd u = unit;
+    const auto jj = static_cast<Eigen::Index>(j);
+    u(jj) += u(jj) + 0.05 <= 1 ? 0.05 : -0.05;
+    std::map<std::string, double> params = best;
+    params[names[j]] = space.to_physical(u)(jj);
+    const Evaluation e = runner.evaluate(config, complete_parameters(config, params), &base);
+    if (e.ok) columns.push_back(stacked(base, &e.residuals));
+  }
+  return columns;
+}
+
+// Candidate targets of an effect in this scene: each fixed block for support springs; joints for
+// a gap (the base fit's hinges first, then its sliding joints); else the effect's default.
+std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, const Evaluation& base,
+                                                  const dem::Scene& scene) {
+  std::vector<std::vector<std::string>> out;
+  if (effect.target == dem::EffectTarget::support_blocks) {
+    for (const auto& b : scene.blocks)
+      if (b.fixed) out.push_back({b.name});
+    return out;
+  }
+  if (effect.target != dem::EffectTarget::joint) return {{}};
+  for (const char* key : {"hinges", "sliding_joints"})
+    for (const auto& c : base.cases)
+      if (c.details.contains(key) && c.details[key].is_array())
+        for (const auto& joint : c.details[key]) {
+          const std::vector<std::string> t{joint.get<std::string>()};
+          if (std::find(out.begin(), out.end(), t) == out.end() && out.size() < 4) out.push_back(t);
+        }
+  return out;
+}
+
+// What every probe of the stage is compared with: the base residual, stacked over the channels,
+// and the base parameters' sensitivities.
+struct SignatureBasis {
+  std::vector<double> residual;
+  std::vector<std::vector<double>> sensitivities;
+  dem::Scene first_scene;  // the first case's scene, whose blocks and joints are the targets
+  dem::ResponseScales scales;
+};
+
+// One target of an effect, probed: its candidate (signature and search ranges), model and best probe.
+struct TargetProbe {
+  ProbedTarget probed;
+  bool applicable = true;  // the effect could be switched on there
+  bool signed_ = false;    // at least one probe ran, so the signature means something
+};
+
+TargetProbe probe_target(DiagnosisRun& run, const dem::Effect& effect, const std::vector<std::string>& targets,
+                         const SignatureBasis& basis) {
+  const DiagnoseOptions& options = run.options;
+  const std::vector<ChannelResidual>& base_residuals = run.base.residuals;
+  TargetProbe out;
+  EffectCandidate& c = out.probed.candidate;
+  c.effect = effect.name;
+  c.target = targets.empty() ? "" : targets.front();
+  ExtendedModel& m = out.probed.model;
+  try {
+    m = extend(run.config, effect, targets, basis.scales,
+               fs::path(options.out) / "candidates" / (effect.name + (c.target.empty() ? "" : "@" + c.target)));
+  } catch (const std::exception& ex) {
+    c.reason = std::string("not applicable here: ") + ex.what();
+    c.signature_score = -1;
+    out.applicable = false;
+    return out;
+  }
+  for (std::size_t i = 0; i < m.parameter_names.size(); ++i)
+    c.search_ranges[m.parameter_names[i]] = {
+        m.parameters[i].search_min,
+        std::min(m.parameters[i].search_max, parameter_cap(m.parameter_names[i], m.parameters[i], run.base_params))};
+  std::vector<std::vector<double>> signatures;
+  std::map<std::string, double>& warm = out.probed.warm;  // the probe closest to the measurement starts the search
+  double warm_error = std::numeric_limits<double>::infinity();
+  const CampaignConfig probed = fitted_cases(m.config, options);
+  const auto probe_at = [&](const std::vector<double>& t) {
+    const auto values = effect_values(m, run.base_params, t);
+    const Evaluation s = run.runner.evaluate(probed, values, &base_residuals);
+    if (s.ok && s.error < warm_error) {
+      warm_error = s.error;
+      warm = values;
+    }
+    return s;
+  };
+  const auto points = probe_points(m.parameter_names.size());
+  for (const auto& t : points) {
+    const Evaluation s = probe_at(t);
+    if (s.ok) signatures.push_back(stacked(base_residuals, &s.residuals));
+  }
+  // one more run where the probes, taken as linear, say the residual is explained: the
+  // search's start when it fits better than every probe
+  if (signatures.size() == points.size()) {
+    const auto t = linearised_fractions(basis.residual, basis.sensitivities, signatures, m.parameter_names.size(),
+                                        kProbeFractions[0], kProbeFractions[2]);
+    if (!t.empty()) probe_at(t);
+  }
+  // starts only, not signatures: a form the range holds at its end is no small change
+  const auto probe_error = [&](const std::vector<double>& t) {
+    const Evaluation s = probe_at(t);
+    return s.ok ? s.error : std::numeric_limits<double>::quiet_NaN();
+  };
+  search_simplest_form(m.parameters, probe_error, kSimplestFormRefinements);
+  if (!signatures.empty()) c.signature_score = signature_score(basis.residual, basis.sensitivities, signatures);
+  if (signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
+  if (!c.target.empty())
+    progress(options, "  " + effect.name + " at " + c.target + ": signature " + format_number(100 * c.signature_score, 2) +
+                          " %, best probe " + format_number(warm_error, 3) + " N");
+  out.signed_ = !signatures.empty();
+  return out;
+}
+
+// The effect probed at every target; its best target joins the candidates, other targets whose
+// signatures come close are kept for calibration too (run.close_targets).
+void probe_effect(DiagnosisRun& run, const dem::Effect& effect, const SignatureBasis& basis) {
+  EffectCandidate best_target;
+  best_target.effect = effect.name;
+  best_target.signature_score = -1;
+  std::vector<ProbedTarget> probed_targets;
+  for (const auto& targets : targets_for(effect, run.base, basis.first_scene)) {
+    TargetProbe t = probe_target(run, effect, targets, basis);
+    if (!t.applicable) {
+      if (best_target.signature_score < 0 && best_target.reason.empty()) best_target = t.probed.candidate;
+      continue;
+    }
+    if (t.signed_) probed_targets.push_back(t.probed);
+    if (t.probed.candidate.signature_score > best_target.signature_score) {
+      best_target = t.probed.candidate;
+      run.models[effect.name] = t.probed.model;
+      run.warm_starts[effect.name] = t.probed.warm;
+    }
+  }
+  for (auto& t : probed_targets)
+    if (t.candidate.target != best_target.target &&
+        signature_comes_close(t.candidate.signature_score, best_target.signature_score, run.options.close_target_share))
+      run.close_targets[effect.name].push_back(std::move(t));
+  if (best_target.signature_score < 0) {
+    best_target.signature_score = 0;
+    if (best_target.reason.empty()) best_target.reason = "no target for this effect in the scene";
+  }
+  progress(run.options, effect.name + (best_target.target.empty() ? "" : " at " + best_target.target) +
+                            ": signature explains " + format_number(100 * best_target.signature_score, 2) +
+                            " % of the residual the base parameters cannot remove");
+  run.d.candidates.push_back(best_target);
+}
+
+}  // namespace
+
+void probe_signatures(DiagnosisRun& run) {
+  // Sensitivities and signatures compare fitted curves only: held-out cases are not simulated for them.
+  const CampaignConfig fitted = fitted_cases(run.config, run.options);
+  SignatureBasis basis;
+  basis.residual = stacked(run.base.residuals, nullptr);
+  basis.sensitivities = base_sensitivities(fitted, run.base_params, run.base.residuals, run.runner);
+  basis.first_scene = build_scene(run.config.cases.front().scene, run.config.source + ": cases[0].scene");
+  basis.scales = response_scales(run.base, run.options);
+  if (basis.scales.peak_normal_stress > 0) run.d.peak_normal_stress = basis.scales.peak_normal_stress;
+  if (basis.scales.start_normal_stress > 0) run.d.start_normal_stress = basis.scales.start_normal_stress;
+  for (const auto* e : run.effects) probe_effect(run, *e, basis);
+  std::stable_sort(run.d.candidates.begin(), run.d.candidates.end(),
+                   [](const auto& a, const auto& b) { return a.signature_score > b.signature_score; });
+}
+
+}  // namespace detail
+}  // namespace demcal::pipelines
