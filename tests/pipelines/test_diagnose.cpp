@@ -64,17 +64,22 @@ smoothing::XYSeries sampled(int n, double noise, std::uint64_t seed, double (*f)
   return s;
 }
 
-// A diagnosis whose base fit misses one channel (main/load_vertical, noise 66 N) by `error` N and
-// whose re-runs scored `reruns` and scatter by `scatter` N.
-Diagnosis base_with_reruns(double error, std::vector<double> reruns, double scatter) {
+// A diagnosis whose base fit misses one channel (main/load_vertical, of noise `noise` N) by `error` N.
+Diagnosis base_missing_by(double error, double noise) {
   Diagnosis d;
   d.error_before = error;
-  d.base_rerun_errors = std::move(reruns);
   ChannelResidual base;
   base.case_name = "main";
   base.channel = "load_vertical";
-  base.noise = 66;
+  base.noise = noise;
   d.base_residuals = {base};
+  return d;
+}
+
+// The same at noise 66 N, whose re-runs scored `reruns` and scatter by `scatter` N.
+Diagnosis base_with_reruns(double error, std::vector<double> reruns, double scatter) {
+  Diagnosis d = base_missing_by(error, 66);
+  d.base_rerun_errors = std::move(reruns);
   d.scatter = {{"main/load_vertical", scatter}};
   return d;
 }
@@ -427,11 +432,7 @@ TEST(Residual, AGaugeThatOnlyMovedBackwardsIsHeldAtItsStart) {
 // The headline says in one sentence what was found: the missing effect with its parameters in
 // engineering units and the range the data allow, or why nothing is added, with the errors.
 TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {
-  Diagnosis d;
-  d.error_before = 232;
-  ChannelResidual base;
-  base.noise = 44;
-  d.base_residuals = {base};
+  Diagnosis d = base_missing_by(232, 44);
   d.base_params = {{"kn", 1e9}};
   EffectCandidate c = tried_candidate("support-compliance", 125, -40);
   c.target = "abutment_right";
@@ -455,11 +456,7 @@ TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {
 }
 
 TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
-  Diagnosis d;
-  d.error_before = 846;
-  ChannelResidual base;
-  base.noise = 57;
-  d.base_residuals = {base};
+  Diagnosis d = base_missing_by(846, 57);
   auto candidate = [](const std::string& effect, double error, double score) {
     EffectCandidate c = tried_candidate(effect, error, score);
     c.params = {{"cohesion", 7e4}, {"tensile_strength", 1.3e3}};
