@@ -478,8 +478,8 @@ std::string base_at_bound_note(const Diagnosis& diagnosis, const optimise::Param
 // densely than the measurement (more than `kDenserRecord` x its rows), has at least `kShapeInGap`
 // simulated envelope points: a fast event (a slip, a snap) recorded densely by the simulation and at
 // two points by the measurement, so that the simulated curve is compared with a straight line there
-// and keeps an error no parameter removes (docs/journal/diagnose-studies.md, "Sampled alike"). It names those fits
-// and recommends recording the simulation at the measurement's rate. "" when there are none.
+// and keeps an error no parameter removes (docs/diagnose.md). It names those fits and recommends
+// recording the simulation at the measurement's rate. "" when there are none.
 constexpr double kSparseGap = 0.25;
 constexpr int kShapeInGap = 3;
 constexpr double kDenserRecord = 1.5;
@@ -509,24 +509,22 @@ void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 //   evidence without spoiling held-out data (rejected because their error did not
 //   fall, or as clearly less good than an accepted fit that itself stayed above the level after
 //   its own further search). Each gets the same further budget, so that no effect wins by search
-//   effort: the truth of an effect can be a valley its first search missed (docs/journal/diagnose-studies.md,
-//   "Contenders searched further").
+//   effort: the truth of an effect can be a valley its first search missed (docs/diagnose.md).
 // A candidate already searched further (continued.simulations > 0) is not named again.
 std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // A sentence for the verdict when the chosen effect's fit, after any further search, still misses
 // the curves by more than the level at which the loop calls a fit explained (noise_level_ratio x
 // error_floor): the effect explains part of the residual, not all of it, and the closest other fit
-// is named with its error and criterion (measured: a wedge-shaped joint gap imitated by a
-// compliant support whose fit stays above that level, docs/journal/diagnose-studies.md). "" otherwise.
+// is named with its error and criterion (a joint gap can be imitated by a compliant support whose
+// fit stays above that level). "" otherwise.
 std::string unexplained_fit_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // The simulations per candidate a further diagnosis should get when this one leaves the question
 // open (no effect found: the base misses by more than kUnexplainedRatio x the floor and no
 // candidate is accepted; a tie; or a chosen fit above the explained level): twice `per_candidate`.
-// In the goal study such searches reached valleys that shorter ones missed (a crushing cap
-// unfound, a joint closure tied with a compliant support, a joint gap imitated by one;
-// docs/journal/diagnose-studies.md, "The budget"). 0 when the verdict is settled.
+// A longer search can reach a valley a shorter one missed (docs/diagnose.md). 0 when the verdict
+// is settled.
 long advised_candidate_simulations(const Diagnosis& diagnosis, const DiagnoseOptions& options, long per_candidate);
 
 // The verdict's sentence advising that further diagnosis ("" when `advised` is 0).
