@@ -3,8 +3,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-#include <numbers>
 
 namespace demcal::dem {
 
@@ -14,12 +12,6 @@ std::vector<Effect> build_registry() {
   return {effects::joint_closure(),      effects::friction_softening(), effects::cohesion(),
           effects::crushing_cap(),       effects::support_compliance(), effects::joint_gap(),
           effects::boundary_restraint()};
-}
-
-// The field of a set_parameter name: "arch_joints.closure_max" -> "closure_max".
-std::string field_of(const std::string& name) {
-  const auto dot = name.rfind('.');
-  return dot == std::string::npos ? name : name.substr(dot + 1);
 }
 
 }  // namespace
@@ -136,14 +128,20 @@ bool effect_enabled(const Scene& scene, const std::string& name) { return find_e
 
 std::optional<double> FittedEffect::effect_value(const std::string& field) const {
   for (const auto& [name, value] : params)
-    if (field_of(name) == field && !base_params.count(name)) return value;
+    if (parameter_field(name) == field && !base_params.count(name)) return value;
   return std::nullopt;
 }
 
 std::optional<double> FittedEffect::fitted_value(const std::string& field) const {
   for (const auto& [name, value] : params)
-    if (field_of(name) == field) return value;
+    if (parameter_field(name) == field) return value;
   return std::nullopt;
+}
+
+const EffectParameter* Effect::parameter(const std::string& field) const {
+  for (const EffectParameter& p : parameters)
+    if (p.name == field) return &p;
+  return nullptr;
 }
 
 std::string describe_fit(const Effect& effect, const FittedEffect& fit) {

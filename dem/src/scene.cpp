@@ -724,6 +724,8 @@ ParameterTarget resolve(const Scene& scene, const std::string& name, bool for_re
 
 }  // namespace
 
+std::string parameter_field(const std::string& name) { return split_parameter(name).second; }
+
 void set_parameter(Scene& scene, const std::string& name, double value) {
   const ParameterTarget t = resolve(scene, name, false);  // rejects unknown names before anything changes
   if (!std::isfinite(value)) throw SceneError("parameter '" + name + "'", "value is not finite");

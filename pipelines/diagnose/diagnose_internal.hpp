@@ -22,10 +22,6 @@
 
 namespace demcal::pipelines::detail {
 
-// The field of a set_parameter name without its group or block ("<group>.<field>" -> "<field>");
-// a bare name is its own field.
-std::string parameter_field(const std::string& name);
-
 // A residual's simulated_rows and simulated_in_gap from its simulated series and that series's
 // loading envelope (its measured gap already set).
 void note_simulated_sampling(ChannelResidual& residual, const smoothing::XYSeries& simulated,
@@ -128,6 +124,11 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
 // one, else of every group; +infinity when it has none.
 double parameter_cap(const std::string& name, const dem::EffectParameter& p, const std::map<std::string, double>& base);
 
+// The space of base + effect (`m`): the base parameters in the campaign's bounds (narrowed around
+// `best` where the options say so), the effect's in its search ranges, each capped parameter below
+// the lowest value of its cap searched.
+optimise::ParameterSpace extended_space(const ExtendedModel& m, const CampaignConfig& config,
+                                        const std::map<std::string, double>& best, const DiagnoseOptions& options);
 // The campaign that calibrates base + effect (`m`; none: the base alone) from `best`, into `folder`,
 // at most `evaluations` simulations, warm-started at `warm`.
 CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
@@ -156,6 +157,8 @@ bool signature_comes_close(double score, double reference, double share);
 // points of common_effective_points over the base and those candidates (kept in the diagnosis);
 // returns them in the order of the base residuals.
 std::vector<double> score_candidates(Diagnosis& d);
+// The candidate of the first effect chosen (Diagnosis::chosen.front()); null when none is.
+const EffectCandidate* chosen_candidate(const Diagnosis& d);
 // The diagnosis's error floor (error_floor of its base noise and scatter), N.
 double floor_of(const Diagnosis& d, const DiagnoseOptions& options);
 // The chosen effect when its fit misses the curves by more than the explained level; else null.

@@ -66,9 +66,7 @@ namespace {
 // The fit the residual figures compare with the base: the chosen effect's, else the best-scoring
 // calibrated candidate's (null: none).
 const EffectCandidate* fit_to_show(const Diagnosis& d) {
-  const EffectCandidate* after = nullptr;
-  for (const auto& c : d.candidates)
-    if (!d.chosen.empty() && c.effect == d.chosen.front()) after = &c;
+  const EffectCandidate* after = detail::chosen_candidate(d);
   if (!after)  // no choice: show the best-scoring calibrated candidate, for comparison
     for (const auto& c : d.candidates)
       if (c.tried && std::isfinite(c.score) && c.residuals.size() == d.base_residuals.size() &&
@@ -183,7 +181,7 @@ void write_best_sets(std::ostream& md, const Diagnosis& d, const DiagnoseOptions
       for (const auto& [k, range] : c.search_ranges) {
         md << " " << k << " " << num(range[0]) << " to " << num(range[1]);
         for (const auto& p : effect.parameters)
-          if (p.name == detail::parameter_field(k) && p.search_scale == dem::SearchScale::peak_normal_stress && std::isfinite(d.peak_normal_stress))
+          if (p.name == dem::parameter_field(k) && p.search_scale == dem::SearchScale::peak_normal_stress && std::isfinite(d.peak_normal_stress))
             md << " (" << num(p.scaled_min) << " to " << num(p.scaled_max)
                << " x the largest contact stress of the base fit, " << num(d.peak_normal_stress)
                << " Pa, and not below the largest at the start of loading, " << num(d.start_normal_stress) << " Pa)";

@@ -20,8 +20,7 @@ namespace {
 // this structure (dem::scaled_search_range).
 dem::EffectParameter registry_parameter(const dem::Effect& effect, const std::string& name,
                                         const dem::ResponseScales& scales) {
-  for (const auto& p : effect.parameters)
-    if (p.name == parameter_field(name)) return dem::scaled_search_range(p, scales);
+  if (const dem::EffectParameter* p = effect.parameter(dem::parameter_field(name))) return dem::scaled_search_range(*p, scales);
   throw CampaignError("effect parameter " + name + " is not in the effect registry");
 }
 
@@ -54,7 +53,7 @@ ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, co
     if (effect.target == dem::EffectTarget::joint_groups) {
       std::vector<std::string> fields;
       for (const auto& n : names)
-        if (std::find(fields.begin(), fields.end(), parameter_field(n)) == fields.end()) fields.push_back(parameter_field(n));
+        if (std::find(fields.begin(), fields.end(), dem::parameter_field(n)) == fields.end()) fields.push_back(dem::parameter_field(n));
       names = fields;
     }
     if (k == 0) {
@@ -84,11 +83,9 @@ bool signature_comes_close(double score, double reference, double share) {
   return reference > 0 && score >= share * reference;
 }
 
-CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
-                                 const std::map<std::string, double>& best, const DiagnoseOptions& options,
-                                 long evaluations, const fs::path& folder, const std::map<std::string, double>& warm) {
-  CampaignConfig c = fitted_cases(m.config, options);
-  std::map<std::string, double> narrowed_lower;  // a capped parameter stays below the lowest value of its cap searched
+optimise::ParameterSpace extended_space(const ExtendedModel& m, const CampaignConfig& config,
+                                        const std::map<std::string, double>& best, const DiagnoseOptions& options) {
+  std::map<std::string, double> caps = best;  // a capped parameter stays below the lowest value of its cap searched
   optimise::ParameterSpace space;
   for (const auto& p : config.space.free_parameters()) {
     optimise::ParameterSpec s = p;
@@ -103,7 +100,7 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
       s.lower = std::max(p.lower, b - half);
       s.upper = std::min(p.upper, b + half);
     }
-    narrowed_lower[s.name] = s.lower;
+    caps[s.name] = s.lower;
     space.add(s);
   }
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
@@ -111,8 +108,6 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
     optimise::ParameterSpec s;
     s.name = m.parameter_names[i];
     s.lower = p.search_min;
-    std::map<std::string, double> caps = best;
-    for (const auto& [name, lower] : narrowed_lower) caps[name] = lower;
     s.upper = std::min(p.search_max, parameter_cap(s.name, p, caps));
     s.scale = p.log_scale ? optimise::ParameterSpec::Scale::log10 : optimise::ParameterSpec::Scale::linear;
     if (!(s.upper > s.lower)) s.lower = s.upper - 0.5 * (p.search_max - p.search_min);
@@ -120,7 +115,15 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   }
   for (const auto& [name, value] : config.space.fixed_parameters()) space.fix(name, value);
   if (const auto& tied = config.space.tied_parameter()) space.tie(tied->name, tied->source, tied->ratio);
-  c.space = space;
+  return space;
+}
+
+CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
+                                 const std::map<std::string, double>& best, const DiagnoseOptions& options,
+                                 long evaluations, const fs::path& folder, const std::map<std::string, double>& warm) {
+  CampaignConfig c = fitted_cases(m.config, options);
+  c.space = extended_space(m, config, best, options);
+  const optimise::ParameterSpace& space = c.space;
   c.name = config.name + "+" + folder.filename().string();
   c.output = folder.string();
   c.archive = diagnosis_archive(options);

@@ -15,13 +15,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const EffectCandidate& chosen_candidate(const Diagnosis& d) {
-  return *std::find_if(d.candidates.begin(), d.candidates.end(),
-                       [&](const EffectCandidate& c) { return c.effect == d.chosen.front(); });
-}
-
 Diagnosis::AddedEffect added_effect(const DiagnosisRun& run, const std::string& folder) {
-  const EffectCandidate& c = chosen_candidate(run.d);
+  const EffectCandidate& c = *chosen_candidate(run.d);
   return {c.effect, c.target, fitted_effect_parameters(c, run.d), run.d.error_before, c.error, folder};
 }
 
@@ -29,7 +24,7 @@ Diagnosis::AddedEffect added_effect(const DiagnosisRun& run, const std::string& 
 // effects in neither model as the candidates; null when no effect is left or the budget is spent.
 std::unique_ptr<DiagnosisRun> next_step(const DiagnosisRun& run, const std::vector<std::string>& in_model,
                                         const fs::path& folder) {
-  const EffectCandidate& c = chosen_candidate(run.d);
+  const EffectCandidate& c = *chosen_candidate(run.d);
   const ExtendedModel& m = run.models.at(c.effect);
   const auto& best = run.best_sets.at(c.effect);
   DiagnoseOptions options = run.options;
@@ -45,7 +40,7 @@ std::unique_ptr<DiagnosisRun> next_step(const DiagnosisRun& run, const std::vect
   }
   // the space the effect was calibrated in: the base parameters' and the effect's own
   CampaignConfig config = m.config;
-  config.space = extended_campaign(m, run.config, run.d.base_params, run.options, 1, folder, best).space;
+  config.space = extended_space(m, run.config, run.d.base_params, run.options);
   fs::create_directories(folder);
   auto next = std::make_unique<DiagnosisRun>(config, options);
   next->per_candidate = run.per_candidate;

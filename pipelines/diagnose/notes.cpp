@@ -183,9 +183,8 @@ std::string detail::fitted_effect_parameters(const EffectCandidate& c, const Dia
   std::string listed;
   for (const auto& [name, value] : c.params) {
     if (d.base_params.count(name)) continue;
-    const auto p = std::find_if(effect.parameters.begin(), effect.parameters.end(),
-                                [&](const dem::EffectParameter& q) { return q.name == parameter_field(name); });
-    if (p == effect.parameters.end()) continue;
+    const dem::EffectParameter* p = effect.parameter(dem::parameter_field(name));
+    if (!p) continue;
     listed += (listed.empty() ? "" : ", ") + name + " ≈ " + with_unit(value, p->unit);
     const auto b = std::find_if(c.bounds.begin(), c.bounds.end(), [&](const ParameterBound& x) { return x.name == name; });
     if (b == c.bounds.end()) continue;
@@ -201,10 +200,10 @@ std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
   const std::string against = " N against " + format_number(noise, 3) + " N of noise";
   switch (d.outcome) {
     case DiagnosisOutcome::missing_effect:
-      for (const auto& c : d.candidates)
-        if (c.effect == d.chosen.front())
-          return "Missing: " + c.effect + (c.target.empty() ? "" : " at " + c.target) + ": " + fitted_effect_parameters(c, d) +
-                 "; force error " + format_number(d.error_before, 3) + " → " + format_number(c.error, 3) + against + ".";
+      if (const EffectCandidate* c = chosen_candidate(d))
+        return "Missing: " + c->effect + (c->target.empty() ? "" : " at " + c->target) + ": " +
+               fitted_effect_parameters(*c, d) + "; force error " + format_number(d.error_before, 3) + " → " +
+               format_number(c->error, 3) + against + ".";
       break;
     case DiagnosisOutcome::undecided: {
       std::string names;

@@ -362,11 +362,6 @@ ParameterBound profile_bound(const std::string& name, double best, const std::ve
   return b;
 }
 
-std::string detail::parameter_field(const std::string& name) {
-  const auto dot = name.rfind('.');
-  return dot == std::string::npos ? name : name.substr(dot + 1);
-}
-
 std::string ParameterBound::describe() const {
   const auto number = [](double v) { return format_number(v, 3); };
   // An unbounded side: the farthest value tried there fits as well, or nothing could be tried there.

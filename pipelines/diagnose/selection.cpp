@@ -47,12 +47,16 @@ double floor_of(const Diagnosis& d, const DiagnoseOptions& options) {
   return error_floor(overall_noise(d.base_residuals), overall(d.scatter), options);
 }
 
-const EffectCandidate* unexplained_chosen(const Diagnosis& d, const DiagnoseOptions& options) {
-  if (d.chosen.size() != 1) return nullptr;
-  const double explained = options.noise_level_ratio * floor_of(d, options);
+const EffectCandidate* chosen_candidate(const Diagnosis& d) {
+  if (d.chosen.empty()) return nullptr;
   for (const auto& c : d.candidates)
-    if (c.effect == d.chosen.front()) return c.error > explained ? &c : nullptr;
+    if (c.effect == d.chosen.front()) return &c;
   return nullptr;
+}
+
+const EffectCandidate* unexplained_chosen(const Diagnosis& d, const DiagnoseOptions& options) {
+  const EffectCandidate* c = d.chosen.size() == 1 ? chosen_candidate(d) : nullptr;
+  return c && c->error > options.noise_level_ratio * floor_of(d, options) ? c : nullptr;
 }
 
 }  // namespace detail

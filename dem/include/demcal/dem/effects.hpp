@@ -91,6 +91,7 @@ struct Effect {
   std::string meaning;    // one line of physics
   EffectTarget target = EffectTarget::joint_groups;
   std::vector<EffectParameter> parameters;
+  const EffectParameter* parameter(const std::string& field) const;  // the one of that field; null if none
   std::function<bool(const Scene&)> enabled;  // on anywhere in the scene
   // What a fit means in a structural engineer's words ("the supports yield elastically ...: horizontal
   // stiffness about 1.1 MN/m ..."); "" when the fit lacks a value the sentence needs.

@@ -239,6 +239,9 @@ std::string scene_hash(const Scene& scene);
 // checked by Scene::Validate, not here, except a gap's end below 0 (the opening and taper hold none).
 void set_parameter(Scene& scene, const std::string& name, double value);
 double get_parameter(const Scene& scene, const std::string& name);
+// The field a set_parameter name sets, without its group or block: "arch_joints.closure_max" ->
+// "closure_max"; a bare name is its own field.
+std::string parameter_field(const std::string& name);
 // Every name set_parameter accepts for this scene (joint-group names, the support blocks' springs,
 // beam_kr when the scene has a loaded block, the gap openings when a gap joint is set).
 std::vector<std::string> parameter_names(const Scene& scene);
