@@ -277,11 +277,11 @@ json normalise_parameter(json p, const std::string& where) {
 const FieldTable<optimise::OptimiserOptions>& optimiser_fields() {
   using optimise::OptimiserOptions;
   static const FieldTable<OptimiserOptions> table{
-      field("algorithm", &OptimiserOptions::algorithm),
+      field("algorithm", &OptimiserOptions::algorithm).flag("pso | tbpso | ga | nlopt:<NAME> (e.g. nlopt:LN_BOBYQA)"),
       field("population", &OptimiserOptions::population),
       field("iterations", &OptimiserOptions::iterations),
       field("max_evaluations", &OptimiserOptions::max_evaluations),
-      field("seed", &OptimiserOptions::seed),
+      field("seed", &OptimiserOptions::seed).flag("Random seed"),
       field("target_value", &OptimiserOptions::target_value).writes([](const OptimiserOptions& o) {
         return std::optional<json>(finite_or_null(o.target_value));  // the default -infinity: null
       }),
@@ -292,21 +292,27 @@ const FieldTable<optimise::OptimiserOptions>& optimiser_fields() {
       field("tbpso_cognitive", &OptimiserOptions::tbpso_cognitive),
       field("tbpso_social", &OptimiserOptions::tbpso_social),
       field("tbpso_trust", &OptimiserOptions::tbpso_trust),
-      field("constriction", &OptimiserOptions::constriction),
+      field("constriction", &OptimiserOptions::constriction)
+          .flag("PSO/TBPSO: multiply by the constriction factor K (eq. 8)"),
       field("max_velocity", &OptimiserOptions::max_velocity),
       field("initial_velocity", &OptimiserOptions::initial_velocity),
-      field("trust_direction", &OptimiserOptions::trust_direction),
+      field("trust_direction", &OptimiserOptions::trust_direction)
+          .flag("TBPSO reading of dx: toward (x_j - x_i) | paper (x_i - x_j)"),
       field("crossover_probability", &OptimiserOptions::crossover_probability),
       field("mutation_probability", &OptimiserOptions::mutation_probability),
       field("ga_sigma_start", &OptimiserOptions::ga_sigma_start),
       field("ga_sigma_end", &OptimiserOptions::ga_sigma_end),
-      field("elitism", &OptimiserOptions::elitism),
+      field("elitism", &OptimiserOptions::elitism).flag("GA: individuals kept unchanged per generation"),
       field("initial_step", &OptimiserOptions::initial_step),
       field("nlopt_population", &OptimiserOptions::nlopt_population),
       field("xtol_rel", &OptimiserOptions::xtol_rel),
       field("ftol_abs", &OptimiserOptions::ftol_abs),
-      named_field("bounds", &OptimiserOptions::bounds, optimise::parse_bound_handling, name_of).unchecked(),
-      named_field("ga_mutation", &OptimiserOptions::ga_mutation, optimise::parse_ga_mutation, name_of).unchecked(),
+      named_field("bounds", &OptimiserOptions::bounds, optimise::parse_bound_handling, name_of)
+          .unchecked()
+          .flag("PSO/TBPSO bound handling: clamp | reflect"),
+      named_field("ga_mutation", &OptimiserOptions::ga_mutation, optimise::parse_ga_mutation, name_of)
+          .unchecked()
+          .flag("GA mutation: reset (paper) | gaussian"),
   };
   return table;
 }

@@ -170,7 +170,8 @@ CampaignConfig campaign_from_json(const nlohmann::json& json, const std::string&
                                   const std::string& source);
 CampaignConfig load_campaign(const std::string& path);
 // The campaign file's "optimiser" keys (demcal/common/field_table.hpp): how each OptimiserOptions
-// field a campaign sets is checked, read and written.
+// field a campaign sets is checked, read and written. Those with a help text are also the flags of
+// `demcal optimise` (--algorithm, --seed, --trust-direction, ...).
 const FieldTable<optimise::OptimiserOptions>& optimiser_fields();
 
 // The "kind" of a surrogate model file (demcal surrogate train); "" when the file cannot be read as
