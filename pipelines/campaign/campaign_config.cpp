@@ -1,12 +1,12 @@
 #include "demcal/pipelines/archive.hpp"
 #include "demcal/pipelines/campaign.hpp"
 
+#include "demcal/common/field_table.hpp"
 #include "demcal/common/format.hpp"
 #include "demcal/dem/generators.hpp"
 #include "demcal/limits/limits.hpp"
 
 #include <cmath>
-#include <type_traits>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -19,45 +19,21 @@ using nlohmann::json;
 
 namespace {
 
-std::string describe(const json& value) {
-  std::string text = value.dump();
-  return text.size() > 60 ? text.substr(0, 60) + "..." : text;
-}
-
-// What a field of type T holds, for messages.
-template <class T>
-const char* expected_kind() {
-  if constexpr (std::is_same_v<T, bool>) return "true or false";
-  else if constexpr (std::is_integral_v<T>) return "an integer";
-  else if constexpr (std::is_floating_point_v<T>) return "a number";
-  else if constexpr (std::is_same_v<T, std::string>) return "a string";
-  else return "a value of another type";
-}
-
-// Reads j[key] into out if present, with a message naming where/key and the value on a type error.
-template <class T>
-void read_field(const json& j, const char* key, T& out, const std::string& where) {
-  if (!j.contains(key)) return;
+// Reads `j` into `options` by `fields`. An error a field words itself (a named value's unknown
+// name; for an unchecked field, JSON that is no string) is reported as "<where>: <what>".
+template <class Options>
+void read_fields(const FieldTable<Options>& fields, const json& j, Options& options, const std::string& where) {
   try {
-    out = j.at(key).get<T>();
-  } catch (const std::exception&) {
-    throw CampaignError(where + "." + key + ": expected " + expected_kind<T>() + ", got " + describe(j.at(key)));
-  }
-  if constexpr (std::is_floating_point_v<T>) {
-    if (!std::isfinite(out)) throw CampaignError(where + "." + key + ": value must be finite, got " + describe(j.at(key)));
+    fields.template read<CampaignError>(j, options, where);
+  } catch (const CampaignError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw CampaignError(where + ": " + e.what());
   }
 }
 
-void reject_unknown_keys(const json& j, const std::set<std::string>& known, const std::string& where) {
-  if (!j.is_object()) throw CampaignError(where + ": expected a JSON object, got " + describe(j));
-  for (const auto& [key, value] : j.items()) {
-    if (!known.count(key)) {
-      std::string list;
-      for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
-      throw CampaignError(where + ": unknown key '" + key + "' (known: " + list + ")");
-    }
-  }
-}
+// An enum value's name, by its module's to_string.
+const auto name_of = [](auto value) { return to_string(value); };
 
 std::string resolve(const std::string& path, const std::string& base_dir) {
   if (path.empty() || fs::path(path).is_absolute() || base_dir.empty()) return path;
@@ -72,24 +48,45 @@ std::string file_hash(const std::string& path) {
   return hash_text(buffer.str());
 }
 
-SceneSpec parse_scene(const json& j, const std::string& base_dir, const std::string& where) {
+// The scene file's solver keys (dem::scene_from_json reads them when the scene is built).
+const std::set<std::string> kSolverKeys{"local_damping", "time_step_safety", "time_step", "time_step_faces",
+                                        "density_scaling", "equilibrium_ratio", "max_equilibrium_time",
+                                        "max_time", "collapse_displacement", "max_velocity"};
+
+// `value`'s JSON, or nullopt (left out) when it is empty.
+template <class T>
+std::optional<json> unless_empty(const T& value) {
+  if (value.empty()) return std::nullopt;
+  return json(value);
+}
+
+// Written with what is set: "options" only with a generator.
+const FieldTable<SceneSpec>& scene_fields() {
+  static const FieldTable<SceneSpec> table{
+      field("file", &SceneSpec::file).writes([](const SceneSpec& s) { return unless_empty(s.file); }),
+      field("generator", &SceneSpec::generator).writes([](const SceneSpec& s) { return unless_empty(s.generator); }),
+      field("options", &SceneSpec::options).writes([](const SceneSpec& s) {
+        return s.generator.empty() ? std::nullopt : std::optional<json>(s.options);
+      }),
+      custom_field<SceneSpec>(
+          "solver",
+          [](SceneSpec& s, const json& value, const std::string& where) {
+            s.solver = value;
+            reject_unknown_keys<CampaignError>(s.solver, kSolverKeys, where + ".solver");
+          },
+          [](const SceneSpec& s) { return unless_empty(s.solver); }),
+  };
+  return table;
+}
+
+// A scene file name or an object; relative file names are resolved by campaign_from_json.
+SceneSpec parse_scene(const json& j, const std::string& where) {
   SceneSpec spec;
   if (j.is_string()) {
-    spec.file = resolve(j.get<std::string>(), base_dir);
+    spec.file = j.get<std::string>();
     return spec;
   }
-  reject_unknown_keys(j, {"file", "generator", "options", "solver"}, where);
-  read_field(j, "file", spec.file, where);
-  read_field(j, "generator", spec.generator, where);
-  if (j.contains("options")) spec.options = j.at("options");
-  if (j.contains("solver")) {
-    spec.solver = j.at("solver");
-    reject_unknown_keys(spec.solver,
-                        {"local_damping", "time_step_safety", "time_step", "time_step_faces", "density_scaling",
-                         "equilibrium_ratio", "max_equilibrium_time", "max_time", "collapse_displacement", "max_velocity"},
-                        where + ".solver");
-  }
-  spec.file = resolve(spec.file, base_dir);
+  read_fields(scene_fields(), j, spec, where);
   if (!spec.file.empty() && !spec.generator.empty())
     throw CampaignError(where + ": give either 'file' or 'generator', not both");
   if (!spec.generator.empty() && spec.generator != "arch" && spec.generator != "wall")
@@ -97,198 +94,228 @@ SceneSpec parse_scene(const json& j, const std::string& base_dir, const std::str
   return spec;
 }
 
-MeasuredSpec parse_measured(const json& j, const std::string& base_dir, const std::string& where) {
+const FieldTable<ColumnMapping>& column_fields() {
+  static const FieldTable<ColumnMapping> table{
+      field("column", &ColumnMapping::column),
+      field("unit", &ColumnMapping::unit),
+      field("scale", &ColumnMapping::scale),
+  };
+  return table;
+}
+
+void read_columns(MeasuredSpec& spec, const json& columns, const std::string& where) {
+  if (!columns.is_object()) throw CampaignError(where + ".columns: expected an object target -> {column, unit}");
+  for (const auto& [target, value] : columns.items()) {
+    ColumnMapping m;
+    m.target = target;
+    const std::string at = where + ".columns." + target;
+    if (value.is_string()) m.column = value.get<std::string>();
+    else read_fields(column_fields(), value, m, at);
+    if (m.column.empty()) throw CampaignError(at + ": missing 'column' (the file's column name)");
+    unit_factor(m.unit, at + ".unit");
+    spec.columns.push_back(m);
+  }
+}
+
+const FieldTable<MeasuredSpec>& measured_fields() {
+  static const FieldTable<MeasuredSpec> table{
+      field("file", &MeasuredSpec::file),
+      custom_field<MeasuredSpec>("columns", read_columns, [](const MeasuredSpec& m) -> std::optional<json> {
+        json columns = json::object();
+        for (const auto& c : m.columns) columns[c.target] = column_fields().to_json(c);
+        return columns;
+      }),
+  };
+  return table;
+}
+
+// A file name or an object; relative file names are resolved by campaign_from_json.
+MeasuredSpec parse_measured(const json& j, const std::string& where) {
   MeasuredSpec spec;
-  if (j.is_string()) {
-    spec.file = resolve(j.get<std::string>(), base_dir);
-    return spec;
-  }
-  reject_unknown_keys(j, {"file", "columns"}, where);
-  read_field(j, "file", spec.file, where);
-  spec.file = resolve(spec.file, base_dir);
-  if (j.contains("columns")) {
-    const json& columns = j.at("columns");
-    if (!columns.is_object()) throw CampaignError(where + ".columns: expected an object target -> {column, unit}");
-    for (const auto& [target, value] : columns.items()) {
-      ColumnMapping m;
-      m.target = target;
-      const std::string at = where + ".columns." + target;
-      if (value.is_string()) {
-        m.column = value.get<std::string>();
-      } else {
-        reject_unknown_keys(value, {"column", "unit", "scale"}, at);
-        read_field(value, "column", m.column, at);
-        read_field(value, "unit", m.unit, at);
-        read_field(value, "scale", m.scale, at);
-      }
-      if (m.column.empty()) throw CampaignError(at + ": missing 'column' (the file's column name)");
-      unit_factor(m.unit, at + ".unit");
-      spec.columns.push_back(m);
-    }
-  }
+  if (j.is_string()) spec.file = j.get<std::string>();
+  else read_fields(measured_fields(), j, spec, where);
   return spec;
 }
 
-void parse_optimiser(const json& j, optimise::OptimiserOptions& o, const std::string& where) {
-  reject_unknown_keys(j, {"algorithm", "population", "iterations", "max_evaluations", "seed", "target_value",
-                          "inertia_start", "inertia_end", "pso_cognitive", "pso_social", "tbpso_cognitive",
-                          "tbpso_social", "tbpso_trust", "constriction", "max_velocity", "initial_velocity",
-                          "bounds", "trust_direction", "crossover_probability", "mutation_probability",
-                          "ga_mutation", "ga_sigma_start", "ga_sigma_end", "elitism", "initial_step",
-                          "nlopt_population", "xtol_rel", "ftol_abs"},
-                      where);
-  read_field(j, "algorithm", o.algorithm, where);
-  read_field(j, "population", o.population, where);
-  read_field(j, "iterations", o.iterations, where);
-  read_field(j, "max_evaluations", o.max_evaluations, where);
-  read_field(j, "seed", o.seed, where);
-  read_field(j, "target_value", o.target_value, where);
-  read_field(j, "inertia_start", o.inertia_start, where);
-  read_field(j, "inertia_end", o.inertia_end, where);
-  read_field(j, "pso_cognitive", o.pso_cognitive, where);
-  read_field(j, "pso_social", o.pso_social, where);
-  read_field(j, "tbpso_cognitive", o.tbpso_cognitive, where);
-  read_field(j, "tbpso_social", o.tbpso_social, where);
-  read_field(j, "tbpso_trust", o.tbpso_trust, where);
-  read_field(j, "constriction", o.constriction, where);
-  read_field(j, "max_velocity", o.max_velocity, where);
-  read_field(j, "initial_velocity", o.initial_velocity, where);
-  read_field(j, "trust_direction", o.trust_direction, where);
-  read_field(j, "crossover_probability", o.crossover_probability, where);
-  read_field(j, "mutation_probability", o.mutation_probability, where);
-  read_field(j, "ga_sigma_start", o.ga_sigma_start, where);
-  read_field(j, "ga_sigma_end", o.ga_sigma_end, where);
-  read_field(j, "elitism", o.elitism, where);
-  read_field(j, "initial_step", o.initial_step, where);
-  read_field(j, "nlopt_population", o.nlopt_population, where);
-  read_field(j, "xtol_rel", o.xtol_rel, where);
-  read_field(j, "ftol_abs", o.ftol_abs, where);
-  try {
-    if (j.contains("bounds")) o.bounds = optimise::parse_bound_handling(j.at("bounds").get<std::string>());
-    if (j.contains("ga_mutation")) o.ga_mutation = optimise::parse_ga_mutation(j.at("ga_mutation").get<std::string>());
-  } catch (const std::exception& e) {
-    throw CampaignError(where + ": " + e.what());
-  }
+// Written with the content hash of each file, part of the campaign's key.
+const FieldTable<CaseSpec>& case_fields() {
+  static const FieldTable<CaseSpec> table{
+      field("name", &CaseSpec::name),
+      field("weight", &CaseSpec::weight),
+      custom_field<CaseSpec>(
+          "scene",
+          [](CaseSpec& c, const json& value, const std::string& where) {
+            c.scene = parse_scene(value, where + ".scene");
+          },
+          [](const CaseSpec& c) -> std::optional<json> {
+            json scene = scene_fields().to_json(c.scene);
+            if (!c.scene.file.empty()) scene["content_hash"] = file_hash(c.scene.file);
+            return scene;
+          }),
+      custom_field<CaseSpec>(
+          "measured",
+          [](CaseSpec& c, const json& value, const std::string& where) {
+            c.measured = parse_measured(value, where + ".measured");
+          },
+          [](const CaseSpec& c) -> std::optional<json> {
+            json measured = measured_fields().to_json(c.measured);
+            measured["content_hash"] = file_hash(c.measured.file);
+            return measured;
+          }),
+  };
+  return table;
 }
 
-void parse_polish(const json& j, PolishSpec& p, const std::string& where) {
-  reject_unknown_keys(j, {"algorithm", "max_evaluations", "initial_step", "xtol_rel"}, where);
-  p.enabled = true;
-  read_field(j, "algorithm", p.options.algorithm, where);
-  read_field(j, "max_evaluations", p.options.max_evaluations, where);
-  read_field(j, "initial_step", p.options.initial_step, where);
-  read_field(j, "xtol_rel", p.options.xtol_rel, where);
-}
-
-json polish_to_json(const PolishSpec& p) {
-  return {{"algorithm", p.options.algorithm}, {"max_evaluations", p.options.max_evaluations},
-          {"initial_step", p.options.initial_step}, {"xtol_rel", p.options.xtol_rel}};
-}
-
-json optimiser_to_json(const optimise::OptimiserOptions& o) {
-  return {{"algorithm", o.algorithm},
-          {"population", o.population},
-          {"iterations", o.iterations},
-          {"max_evaluations", o.max_evaluations},
-          {"seed", o.seed},
-          {"target_value", std::isfinite(o.target_value) ? json(o.target_value) : json(nullptr)},
-          {"inertia_start", o.inertia_start},
-          {"inertia_end", o.inertia_end},
-          {"pso_cognitive", o.pso_cognitive},
-          {"pso_social", o.pso_social},
-          {"tbpso_cognitive", o.tbpso_cognitive},
-          {"tbpso_social", o.tbpso_social},
-          {"tbpso_trust", o.tbpso_trust},
-          {"constriction", o.constriction},
-          {"max_velocity", o.max_velocity},
-          {"initial_velocity", o.initial_velocity},
-          {"bounds", optimise::to_string(o.bounds)},
-          {"trust_direction", o.trust_direction},
-          {"crossover_probability", o.crossover_probability},
-          {"mutation_probability", o.mutation_probability},
-          {"ga_mutation", optimise::to_string(o.ga_mutation)},
-          {"ga_sigma_start", o.ga_sigma_start},
-          {"ga_sigma_end", o.ga_sigma_end},
-          {"elitism", o.elitism},
-          {"initial_step", o.initial_step},
-          {"nlopt_population", o.nlopt_population},
-          {"xtol_rel", o.xtol_rel},
-          {"ftol_abs", o.ftol_abs}};
-}
-
-void parse_smoother(const json& j, smoothing::SmootherOptions& s, const std::string& where) {
-  reject_unknown_keys(j, {"points", "hidden_layers", "hidden_width", "epochs", "learning_rate",
-                          "final_learning_rate", "first_layer_gain", "stopping", "check_interval",
-                          "trend_cutoff", "backend", "seed", "threads"},
-                      where);
-  read_field(j, "points", s.points, where);
-  read_field(j, "hidden_layers", s.hidden_layers, where);
-  read_field(j, "hidden_width", s.hidden_width, where);
-  read_field(j, "epochs", s.epochs, where);
-  read_field(j, "learning_rate", s.learning_rate, where);
-  read_field(j, "final_learning_rate", s.final_learning_rate, where);
-  read_field(j, "first_layer_gain", s.first_layer_gain, where);
-  read_field(j, "check_interval", s.check_interval, where);
-  read_field(j, "trend_cutoff", s.trend_cutoff, where);
-  read_field(j, "seed", s.seed, where);
-  read_field(j, "threads", s.threads, where);
-  std::string text;
-  try {
-    if (j.contains("stopping")) {
-      read_field(j, "stopping", text, where);
-      s.stopping = smoothing::parse_stopping_rule(text);
-    }
-    if (j.contains("backend")) {
-      read_field(j, "backend", text, where);
-      s.backend = smoothing::parse_smoother_backend(text);
-    }
-  } catch (const std::invalid_argument& e) {
-    throw CampaignError(where + ": " + e.what());
-  }
+const FieldTable<optimise::PolishOptions>& polish_fields() {
+  using optimise::PolishOptions;
+  static const FieldTable<PolishOptions> table{
+      field("algorithm", &PolishOptions::algorithm),
+      field("max_evaluations", &PolishOptions::max_evaluations),
+      field("initial_step", &PolishOptions::initial_step),
+      field("xtol_rel", &PolishOptions::xtol_rel),
+  };
+  return table;
 }
 
 // Every option that changes a smoothed curve is here: it is part of the objective key under which
 // the archive keeps fitness values, so values of another smoother are never read back.
-json smoother_to_json(const smoothing::SmootherOptions& s) {
-  return {{"points", s.points}, {"hidden_layers", s.hidden_layers}, {"hidden_width", s.hidden_width},
-          {"epochs", s.epochs}, {"learning_rate", s.learning_rate}, {"final_learning_rate", s.final_learning_rate},
-          {"first_layer_gain", s.first_layer_gain}, {"stopping", smoothing::to_string(s.stopping)},
-          {"check_interval", s.check_interval}, {"trend_cutoff", s.trend_cutoff},
-          {"backend", smoothing::to_string(s.backend)}, {"seed", s.seed}, {"threads", s.threads}};
+const FieldTable<smoothing::SmootherOptions>& smoother_fields() {
+  using smoothing::SmootherOptions;
+  static const FieldTable<SmootherOptions> table{
+      field("points", &SmootherOptions::points),
+      field("hidden_layers", &SmootherOptions::hidden_layers),
+      field("hidden_width", &SmootherOptions::hidden_width),
+      field("epochs", &SmootherOptions::epochs),
+      field("learning_rate", &SmootherOptions::learning_rate),
+      field("final_learning_rate", &SmootherOptions::final_learning_rate),
+      field("first_layer_gain", &SmootherOptions::first_layer_gain),
+      field("check_interval", &SmootherOptions::check_interval),
+      field("trend_cutoff", &SmootherOptions::trend_cutoff),
+      field("seed", &SmootherOptions::seed),
+      field("threads", &SmootherOptions::threads),
+      named_field("stopping", &SmootherOptions::stopping, smoothing::parse_stopping_rule, name_of),
+      named_field("backend", &SmootherOptions::backend, smoothing::parse_smoother_backend, name_of),
+  };
+  return table;
 }
 
-json scene_to_json_spec(const SceneSpec& s) {
-  json j = json::object();
-  if (!s.file.empty()) j["file"] = s.file;
-  if (!s.generator.empty()) {
-    j["generator"] = s.generator;
-    j["options"] = s.options;
-  }
-  if (!s.solver.empty()) j["solver"] = s.solver;
-  return j;
+// The objective's window: read as a named value, its parse message prefixed with the key (it does
+// not name it); absent for the paper's window, so older campaigns keep their keys.
+Field<CampaignConfig> objective_window_field() {
+  auto window = named_field<CampaignConfig>("window", [](auto& c) -> auto& { return c.objective_options.window; },
+                                            smoothing::parse_objective_window, name_of);
+  window.read = [parse = window.read](CampaignConfig& c, const json& value, const std::string& where) {
+    try {
+      parse(c, value, where);
+    } catch (const std::invalid_argument& e) {
+      throw CampaignError(where + ".window: " + e.what());
+    }
+  };
+  return std::move(window).writes([](const CampaignConfig& c) -> std::optional<json> {
+    if (c.objective_options.window == smoothing::ObjectiveWindow::common) return std::nullopt;
+    return smoothing::to_string(c.objective_options.window);
+  });
 }
 
-json measured_to_json(const MeasuredSpec& m) {
-  json columns = json::object();
-  for (const auto& c : m.columns) columns[c.target] = {{"column", c.column}, {"unit", c.unit}, {"scale", c.scale}};
-  return {{"file", m.file}, {"columns", columns}};
+// The "objective" object: CampaignConfig's objective type and options, and the smoother of
+// objective 2 (written only for objective 2).
+const FieldTable<CampaignConfig>& objective_fields() {
+  static const FieldTable<CampaignConfig> table{
+      field("type", &CampaignConfig::objective),
+      field<CampaignConfig>("points", [](auto& c) -> auto& { return c.objective_options.points; }),
+      objective_window_field(),
+      field<CampaignConfig>("weights", [](auto& c) -> auto& { return c.objective_options.channel_weights; }),
+      custom_field<CampaignConfig>(
+          "smoother",
+          [](CampaignConfig& c, const json& value, const std::string& where) {
+            read_fields(smoother_fields(), value, c.smoother, where + ".smoother");
+          },
+          [](const CampaignConfig& c) -> std::optional<json> {
+            if (c.objective != 2) return std::nullopt;
+            return smoother_fields().to_json(c.smoother);
+          }),
+  };
+  return table;
+}
+
+const FieldTable<BackendSpec>& backend_fields() {
+  static const FieldTable<BackendSpec> table{
+      field("max_output_mb", &BackendSpec::max_output_mb),
+      field("fitness_threads", &BackendSpec::fitness_threads),
+      field("type", &BackendSpec::type),
+      field("threads", &BackendSpec::threads),
+      field("command", &BackendSpec::command),
+      field("timeout_s", &BackendSpec::timeout_s),
+      field("parallel", &BackendSpec::parallel),
+  };
+  return table;
+}
+
+const FieldTable<CampaignConfig>& identifiability_fields() {
+  static const FieldTable<CampaignConfig> table{field("relative_band", &CampaignConfig::identifiability_band)};
+  return table;
 }
 
 // A parameter entry with "log"/"log10"/"linear" scale and lower/upper (min/max accepted).
 json normalise_parameter(json p, const std::string& where) {
-  if (!p.is_object()) throw CampaignError(where + ": expected {name, lower, upper, scale}, got " + describe(p));
-  reject_unknown_keys(p, {"name", "lower", "upper", "min", "max", "scale"}, where);
+  if (!p.is_object()) throw CampaignError(where + ": expected {name, lower, upper, scale}, got " + describe_json(p));
+  reject_unknown_keys<CampaignError>(p, {"name", "lower", "upper", "min", "max", "scale"}, where);
   if (p.contains("min")) p["lower"] = p["min"], p.erase("min");
   if (p.contains("max")) p["upper"] = p["max"], p.erase("max");
   if (p.contains("scale") && p["scale"].is_string() && p["scale"] == "log") p["scale"] = "log10";
   for (const char* key : {"lower", "upper"}) {
     if (!p.contains(key)) throw CampaignError(where + ": missing '" + key + "'");
-    if (!p[key].is_number()) throw CampaignError(where + "." + key + ": not a number: " + describe(p[key]));
+    if (!p[key].is_number()) throw CampaignError(where + "." + key + ": not a number: " + describe_json(p[key]));
   }
   return p;
 }
 
 }  // namespace
+
+// Read in this order (the first bad value is reported), the enums last; these are unchecked: JSON
+// that is no string is reported as "<where>: <nlohmann's message>", as campaigns always were.
+const FieldTable<optimise::OptimiserOptions>& optimiser_fields() {
+  using optimise::OptimiserOptions;
+  static const FieldTable<OptimiserOptions> table{
+      field("algorithm", &OptimiserOptions::algorithm).flag("pso | tbpso | ga | nlopt:<NAME> (e.g. nlopt:LN_BOBYQA)"),
+      field("population", &OptimiserOptions::population),
+      field("iterations", &OptimiserOptions::iterations),
+      field("max_evaluations", &OptimiserOptions::max_evaluations),
+      field("seed", &OptimiserOptions::seed).flag("Random seed"),
+      field("target_value", &OptimiserOptions::target_value).writes([](const OptimiserOptions& o) {
+        return std::optional<json>(finite_or_null(o.target_value));  // the default -infinity: null
+      }),
+      field("inertia_start", &OptimiserOptions::inertia_start),
+      field("inertia_end", &OptimiserOptions::inertia_end),
+      field("pso_cognitive", &OptimiserOptions::pso_cognitive),
+      field("pso_social", &OptimiserOptions::pso_social),
+      field("tbpso_cognitive", &OptimiserOptions::tbpso_cognitive),
+      field("tbpso_social", &OptimiserOptions::tbpso_social),
+      field("tbpso_trust", &OptimiserOptions::tbpso_trust),
+      field("constriction", &OptimiserOptions::constriction)
+          .flag("PSO/TBPSO: multiply by the constriction factor K (eq. 8)"),
+      field("max_velocity", &OptimiserOptions::max_velocity),
+      field("initial_velocity", &OptimiserOptions::initial_velocity),
+      field("trust_direction", &OptimiserOptions::trust_direction)
+          .flag("TBPSO reading of dx: toward (x_j - x_i) | paper (x_i - x_j)"),
+      field("crossover_probability", &OptimiserOptions::crossover_probability),
+      field("mutation_probability", &OptimiserOptions::mutation_probability),
+      field("ga_sigma_start", &OptimiserOptions::ga_sigma_start),
+      field("ga_sigma_end", &OptimiserOptions::ga_sigma_end),
+      field("elitism", &OptimiserOptions::elitism).flag("GA: individuals kept unchanged per generation"),
+      field("initial_step", &OptimiserOptions::initial_step),
+      field("nlopt_population", &OptimiserOptions::nlopt_population),
+      field("xtol_rel", &OptimiserOptions::xtol_rel),
+      field("ftol_abs", &OptimiserOptions::ftol_abs),
+      named_field("bounds", &OptimiserOptions::bounds, optimise::parse_bound_handling, name_of)
+          .unchecked()
+          .flag("PSO/TBPSO bound handling: clamp | reflect"),
+      named_field("ga_mutation", &OptimiserOptions::ga_mutation, optimise::parse_ga_mutation, name_of)
+          .unchecked()
+          .flag("GA mutation: reset (paper) | gaussian"),
+  };
+  return table;
+}
 
 double unit_factor(const std::string& unit, const std::string& where) {
   static const std::map<std::string, double> factors{
@@ -416,23 +443,11 @@ void CampaignConfig::Validate() const {
 
 json CampaignConfig::result_defining_json() const {
   json cases_json = json::array();
-  for (const auto& c : cases) {
-    json scene = scene_to_json_spec(c.scene);
-    if (!c.scene.file.empty()) scene["content_hash"] = file_hash(c.scene.file);
-    json measured = measured_to_json(c.measured);
-    measured["content_hash"] = file_hash(c.measured.file);
-    cases_json.push_back({{"name", c.name}, {"scene", scene}, {"measured", measured}, {"weight", c.weight}});
-  }
-  json objective_json = {{"type", objective}, {"points", objective_options.points},
-                         {"weights", objective_options.channel_weights}};
-  // absent for the paper's window: older campaigns keep their keys
-  if (objective_options.window != smoothing::ObjectiveWindow::common)
-    objective_json["window"] = smoothing::to_string(objective_options.window);
-  if (objective == 2) objective_json["smoother"] = smoother_to_json(smoother);
-  json j = {{"cases", cases_json}, {"parameters", space.to_json()}, {"objective", objective_json},
-            {"optimiser", optimiser_to_json(optimiser)}};
+  for (const auto& c : cases) cases_json.push_back(case_fields().to_json(c));
+  json j = {{"cases", cases_json}, {"parameters", space.to_json()}, {"objective", objective_fields().to_json(*this)},
+            {"optimiser", optimiser_fields().to_json(optimiser)}};
   if (backend.type == "command") j["command"] = backend.command;
-  if (polish.enabled) j["polish"] = polish_to_json(polish);  // absent otherwise: older keys unchanged
+  if (polish.enabled) j["polish"] = polish_fields().to_json(polish.options);  // absent otherwise: older keys unchanged
   if (surrogate.enabled || optimiser.algorithm == "bo") j["surrogate"] = surrogate_to_json(surrogate);
   return j;
 }
@@ -440,10 +455,8 @@ json CampaignConfig::result_defining_json() const {
 json CampaignConfig::to_json() const {
   json j = result_defining_json();
   j["name"] = name;
-  j["backend"] = {{"type", backend.type}, {"threads", backend.threads}, {"command", backend.command},
-                  {"timeout_s", backend.timeout_s}, {"parallel", backend.parallel},
-                  {"fitness_threads", backend.fitness_threads}, {"max_output_mb", backend.max_output_mb}};
-  j["identifiability"] = {{"relative_band", identifiability_band}};
+  j["backend"] = backend_fields().to_json(backend);
+  j["identifiability"] = identifiability_fields().to_json(*this);
   j["output"] = output;
   j["report"] = report;
   return j;
@@ -452,11 +465,11 @@ json CampaignConfig::to_json() const {
 CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, const std::string& source) {
   CampaignConfig c;
   c.source = source;
-  reject_unknown_keys(j, {"name", "scene", "measured", "cases", "parameters", "fixed", "tied", "objective",
+  reject_unknown_keys<CampaignError>(j, {"name", "scene", "measured", "cases", "parameters", "fixed", "tied", "objective",
                           "optimiser", "backend", "output", "archive", "report", "description", "polish",
                           "identifiability", "surrogate"},
                       source);
-  read_field(j, "name", c.name, source);
+  read_field<CampaignError>(j, "name", c.name, source);
   if (j.contains("cases")) {
     if (j.contains("scene") || j.contains("measured"))
       throw CampaignError(source + ": give either 'cases' or 'scene' + 'measured', not both");
@@ -464,21 +477,20 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
     if (!cases.is_array() || cases.empty()) throw CampaignError(source + ".cases: expected a non-empty array");
     for (size_t i = 0; i < cases.size(); ++i) {
       const std::string where = source + ": cases[" + std::to_string(i) + "]";
-      reject_unknown_keys(cases[i], {"name", "scene", "measured", "weight"}, where);
       CaseSpec spec;
       spec.name = "case" + std::to_string(i + 1);
-      read_field(cases[i], "name", spec.name, where);
-      read_field(cases[i], "weight", spec.weight, where);
-      if (cases[i].contains("scene")) spec.scene = parse_scene(cases[i].at("scene"), base_dir, where + ".scene");
-      if (cases[i].contains("measured"))
-        spec.measured = parse_measured(cases[i].at("measured"), base_dir, where + ".measured");
+      read_fields(case_fields(), cases[i], spec, where);
       c.cases.push_back(spec);
     }
   } else if (j.contains("scene") || j.contains("measured")) {
     CaseSpec spec;
-    if (j.contains("scene")) spec.scene = parse_scene(j.at("scene"), base_dir, source + ": scene");
-    if (j.contains("measured")) spec.measured = parse_measured(j.at("measured"), base_dir, source + ": measured");
+    if (j.contains("scene")) spec.scene = parse_scene(j.at("scene"), source + ": scene");
+    if (j.contains("measured")) spec.measured = parse_measured(j.at("measured"), source + ": measured");
     c.cases.push_back(spec);
+  }
+  for (auto& spec : c.cases) {
+    spec.scene.file = resolve(spec.scene.file, base_dir);
+    spec.measured.file = resolve(spec.measured.file, base_dir);
   }
   if (j.contains("parameters")) {
     const json& params = j.at("parameters");
@@ -500,50 +512,29 @@ CampaignConfig campaign_from_json(const json& j, const std::string& base_dir, co
     if (o.is_number_integer()) {
       c.objective = o.get<int>();
     } else {
-      reject_unknown_keys(o, {"type", "weights", "points", "window", "smoother"}, where);
-      read_field(o, "type", c.objective, where);
-      read_field(o, "points", c.objective_options.points, where);
-      if (o.contains("window")) {
-        std::string window;
-        read_field(o, "window", window, where);
-        try {
-          c.objective_options.window = smoothing::parse_objective_window(window);
-        } catch (const std::invalid_argument& e) {
-          throw CampaignError(where + ".window: " + e.what());
-        }
-      }
-      read_field(o, "weights", c.objective_options.channel_weights, where);
-      if (o.contains("smoother")) parse_smoother(o.at("smoother"), c.smoother, where + ".smoother");
+      read_fields(objective_fields(), o, c, where);
     }
   }
-  if (j.contains("optimiser")) parse_optimiser(j.at("optimiser"), c.optimiser, source + ": optimiser");
+  if (j.contains("optimiser")) read_fields(optimiser_fields(), j.at("optimiser"), c.optimiser, source + ": optimiser");
   if (j.contains("backend")) {
     const json& b = j.at("backend");
     const std::string where = source + ": backend";
     if (b.is_string()) {
       c.backend.type = b.get<std::string>();
     } else {
-      reject_unknown_keys(b, {"type", "threads", "command", "timeout_s", "parallel", "fitness_threads", "max_output_mb"},
-                          where);
-      read_field(b, "max_output_mb", c.backend.max_output_mb, where);
-      read_field(b, "fitness_threads", c.backend.fitness_threads, where);
-      read_field(b, "type", c.backend.type, where);
-      read_field(b, "threads", c.backend.threads, where);
-      read_field(b, "command", c.backend.command, where);
-      read_field(b, "timeout_s", c.backend.timeout_s, where);
-      read_field(b, "parallel", c.backend.parallel, where);
+      read_fields(backend_fields(), b, c.backend, where);
     }
   }
-  if (j.contains("polish")) parse_polish(j.at("polish"), c.polish, source + ": polish");
-  if (j.contains("surrogate")) parse_surrogate(j.at("surrogate"), c.surrogate, source + ": surrogate", base_dir);
-  if (j.contains("identifiability")) {
-    const std::string where = source + ": identifiability";
-    reject_unknown_keys(j.at("identifiability"), {"relative_band"}, where);
-    read_field(j.at("identifiability"), "relative_band", c.identifiability_band, where);
+  if (j.contains("polish")) {
+    read_fields(polish_fields(), j.at("polish"), c.polish.options, source + ": polish");
+    c.polish.enabled = true;
   }
-  read_field(j, "output", c.output, source);
-  read_field(j, "archive", c.archive, source);
-  read_field(j, "report", c.report, source);
+  if (j.contains("surrogate")) parse_surrogate(j.at("surrogate"), c.surrogate, source + ": surrogate", base_dir);
+  if (j.contains("identifiability"))
+    read_fields(identifiability_fields(), j.at("identifiability"), c, source + ": identifiability");
+  read_field<CampaignError>(j, "output", c.output, source);
+  read_field<CampaignError>(j, "archive", c.archive, source);
+  read_field<CampaignError>(j, "report", c.report, source);
   c.output = resolve(c.output, base_dir);
   c.archive = resolve(c.archive, base_dir);
   return c;
@@ -653,68 +644,72 @@ smoothing::Curve load_measured(const MeasuredSpec& spec) {
 }
 
 namespace {
-template <class T>
-void option(const json& j, const char* key, T& out, const std::string& where) {
-  read_field(j, key, out, where);
+
+// The generators' options (scene.options): ArchOptions and WallOptions fields by name.
+const FieldTable<dem::ArchOptions>& arch_fields() {
+  using dem::ArchOptions;
+  static const FieldTable<ArchOptions> table{
+      field("span", &ArchOptions::span),
+      field("rise", &ArchOptions::rise),
+      field("thickness", &ArchOptions::thickness),
+      field("width", &ArchOptions::width),
+      field("voussoirs", &ArchOptions::voussoirs),
+      field("density", &ArchOptions::density),
+      field("kn", &ArchOptions::kn),
+      field("ks", &ArchOptions::ks),
+      field("friction_deg", &ArchOptions::friction_deg),
+      field("contacts_per_joint", &ArchOptions::contacts_per_joint),
+      field("load_voussoir", &ArchOptions::load_voussoir),
+      field("interface_height", &ArchOptions::interface_height),
+      field("interface_length", &ArchOptions::interface_length),
+      field("velocity", &ArchOptions::velocity),
+      field("max_displacement", &ArchOptions::max_displacement),
+      field("record_interval", &ArchOptions::record_interval),
+      field("load", &ArchOptions::load),
+      field("max_time", &ArchOptions::max_time),
+      field("abutment_depth", &ArchOptions::abutment_depth),
+  };
+  return table;
+}
+
+const FieldTable<dem::WallOptions>& wall_fields() {
+  using dem::WallOptions;
+  static const FieldTable<WallOptions> table{
+      field("height", &WallOptions::height),
+      field("length", &WallOptions::length),
+      field("thickness", &WallOptions::thickness),
+      field("unit_height", &WallOptions::unit_height),
+      field("unit_length", &WallOptions::unit_length),
+      field("density", &WallOptions::density),
+      field("precompression_mpa", &WallOptions::precompression_mpa),
+      field("kn", &WallOptions::kn),
+      field("ks", &WallOptions::ks),
+      field("friction_deg", &WallOptions::friction_deg),
+      field("contacts_per_joint", &WallOptions::contacts_per_joint),
+      field("velocity", &WallOptions::velocity),
+      field("max_displacement", &WallOptions::max_displacement),
+      field("record_interval", &WallOptions::record_interval),
+      field("beam_rotation", &WallOptions::beam_rotation),
+      field("beam_height", &WallOptions::beam_height),
+      field("load_height", &WallOptions::load_height),
+      field("max_time", &WallOptions::max_time),
+  };
+  return table;
 }
 
 // The scene of a file or a generator, as it comes.
 dem::Scene generate_scene(const SceneSpec& spec, const std::string& where) {
   if (!spec.file.empty()) return dem::load_scene(spec.file);
-  const json& o = spec.options;
   const std::string at = where + ".options";
   if (spec.generator == "arch") {
-    reject_unknown_keys(o, {"span", "rise", "thickness", "width", "voussoirs", "density", "kn", "ks", "friction_deg",
-                            "contacts_per_joint", "load_voussoir", "interface_height", "interface_length",
-                            "velocity", "max_displacement", "record_interval", "load", "max_time", "abutment_depth"},
-                        at);
     dem::ArchOptions a;
-    option(o, "span", a.span, at);
-    option(o, "rise", a.rise, at);
-    option(o, "thickness", a.thickness, at);
-    option(o, "width", a.width, at);
-    option(o, "voussoirs", a.voussoirs, at);
-    option(o, "density", a.density, at);
-    option(o, "kn", a.kn, at);
-    option(o, "ks", a.ks, at);
-    option(o, "friction_deg", a.friction_deg, at);
-    option(o, "contacts_per_joint", a.contacts_per_joint, at);
-    option(o, "load_voussoir", a.load_voussoir, at);
-    option(o, "interface_height", a.interface_height, at);
-    option(o, "interface_length", a.interface_length, at);
-    option(o, "velocity", a.velocity, at);
-    option(o, "max_displacement", a.max_displacement, at);
-    option(o, "record_interval", a.record_interval, at);
-    option(o, "load", a.load, at);
-    option(o, "max_time", a.max_time, at);
-    option(o, "abutment_depth", a.abutment_depth, at);
+    read_fields(arch_fields(), spec.options, a, at);
     a.Validate();
     return dem::make_arch(a);
   }
   if (spec.generator == "wall") {
-    reject_unknown_keys(o, {"height", "length", "thickness", "unit_height", "unit_length", "density",
-                            "precompression_mpa", "kn", "ks", "friction_deg", "contacts_per_joint", "velocity",
-                            "max_displacement", "record_interval", "beam_rotation", "beam_height", "load_height", "max_time"},
-                        at);
     dem::WallOptions w;
-    option(o, "height", w.height, at);
-    option(o, "length", w.length, at);
-    option(o, "thickness", w.thickness, at);
-    option(o, "unit_height", w.unit_height, at);
-    option(o, "unit_length", w.unit_length, at);
-    option(o, "density", w.density, at);
-    option(o, "precompression_mpa", w.precompression_mpa, at);
-    option(o, "kn", w.kn, at);
-    option(o, "ks", w.ks, at);
-    option(o, "friction_deg", w.friction_deg, at);
-    option(o, "contacts_per_joint", w.contacts_per_joint, at);
-    option(o, "velocity", w.velocity, at);
-    option(o, "max_displacement", w.max_displacement, at);
-    option(o, "record_interval", w.record_interval, at);
-    option(o, "beam_rotation", w.beam_rotation, at);
-    option(o, "beam_height", w.beam_height, at);
-    option(o, "load_height", w.load_height, at);
-    option(o, "max_time", w.max_time, at);
+    read_fields(wall_fields(), spec.options, w, at);
     w.Validate();
     return dem::make_wall(w);
   }

@@ -59,35 +59,31 @@ void MlpOptions::Validate() const {
                          "surrogate mlp.members x hidden_layers x hidden_width^2");
 }
 
-nlohmann::json MlpOptions::to_json() const {
-  return {{"members", members},
-          {"hidden_layers", hidden_layers},
-          {"hidden_width", hidden_width},
-          {"epochs", epochs},
-          {"learning_rate", learning_rate},
-          {"final_learning_rate", final_learning_rate},
-          {"weight_decay", weight_decay},
-          {"bootstrap", bootstrap},
-          {"seed", seed},
-          {"refit_epochs", refit_epochs},
-          {"refit_learning_rate", refit_learning_rate}};
+namespace {
+
+const FieldTable<MlpOptions>& mlp_fields() {
+  static const FieldTable<MlpOptions> table{
+      field("members", &MlpOptions::members),
+      field("hidden_layers", &MlpOptions::hidden_layers),
+      field("hidden_width", &MlpOptions::hidden_width),
+      field("epochs", &MlpOptions::epochs),
+      field("learning_rate", &MlpOptions::learning_rate),
+      field("final_learning_rate", &MlpOptions::final_learning_rate),
+      field("weight_decay", &MlpOptions::weight_decay),
+      field("bootstrap", &MlpOptions::bootstrap),
+      field("seed", &MlpOptions::seed),
+      field("refit_epochs", &MlpOptions::refit_epochs),
+      field("refit_learning_rate", &MlpOptions::refit_learning_rate),
+  };
+  return table;
 }
 
+}  // namespace
+
+nlohmann::json MlpOptions::to_json() const { return mlp_fields().to_json(*this); }
+
 MlpOptions MlpOptions::from_json(const nlohmann::json& j, const std::string& where) {
-  return detail::options_from_json<MlpOptions>(j, where, [&](auto& o, const std::string& key, const nlohmann::json& value) {
-    if (key == "members") o.members = value.get<int>();
-    else if (key == "hidden_layers") o.hidden_layers = value.get<int>();
-    else if (key == "hidden_width") o.hidden_width = value.get<int>();
-    else if (key == "epochs") o.epochs = value.get<int>();
-    else if (key == "learning_rate") o.learning_rate = value.get<double>();
-    else if (key == "final_learning_rate") o.final_learning_rate = value.get<double>();
-    else if (key == "weight_decay") o.weight_decay = value.get<double>();
-    else if (key == "bootstrap") o.bootstrap = value.get<bool>();
-    else if (key == "seed") o.seed = value.get<std::uint64_t>();
-    else if (key == "refit_epochs") o.refit_epochs = value.get<int>();
-    else if (key == "refit_learning_rate") o.refit_learning_rate = value.get<double>();
-    else throw std::invalid_argument("unknown key");
-  });
+  return detail::options_from_json(j, where, mlp_fields());
 }
 
 namespace {

@@ -168,24 +168,29 @@ void GpOptions::Validate() const {
                                 " must satisfy 0 < min_noise < max_noise");
 }
 
-nlohmann::json GpOptions::to_json() const {
-  return {{"restarts", restarts},     {"max_iterations", max_iterations}, {"seed", seed},
-          {"min_length", min_length}, {"max_length", max_length},         {"min_noise", min_noise},
-          {"max_noise", max_noise},   {"log_transform", to_string(log_transform)}};
+namespace {
+
+const FieldTable<GpOptions>& gp_fields() {
+  static const FieldTable<GpOptions> table{
+      field("restarts", &GpOptions::restarts),
+      field("max_iterations", &GpOptions::max_iterations),
+      field("seed", &GpOptions::seed),
+      field("min_length", &GpOptions::min_length),
+      field("max_length", &GpOptions::max_length),
+      field("min_noise", &GpOptions::min_noise),
+      field("max_noise", &GpOptions::max_noise),
+      named_field("log_transform", &GpOptions::log_transform, parse_log_transform,
+                  [](LogTransform t) { return to_string(t); }),
+  };
+  return table;
 }
 
+}  // namespace
+
+nlohmann::json GpOptions::to_json() const { return gp_fields().to_json(*this); }
+
 GpOptions GpOptions::from_json(const nlohmann::json& j, const std::string& where) {
-  return detail::options_from_json<GpOptions>(j, where, [&](auto& o, const std::string& key, const nlohmann::json& value) {
-    if (key == "restarts") o.restarts = value.get<int>();
-    else if (key == "max_iterations") o.max_iterations = value.get<int>();
-    else if (key == "seed") o.seed = value.get<std::uint64_t>();
-    else if (key == "min_length") o.min_length = value.get<double>();
-    else if (key == "max_length") o.max_length = value.get<double>();
-    else if (key == "min_noise") o.min_noise = value.get<double>();
-    else if (key == "max_noise") o.max_noise = value.get<double>();
-    else if (key == "log_transform") o.log_transform = parse_log_transform(value.get<std::string>());
-    else throw std::invalid_argument("unknown key");
-  });
+  return detail::options_from_json(j, where, gp_fields());
 }
 
 double GpPrediction::observation_sd() const { return std::sqrt(sd * sd + noise_sd * noise_sd); }

@@ -1,7 +1,8 @@
 // Private to the surrogate module: what its sources share (JSON of vectors, the held-out relative
-// error, reading an options struct).
+// error, reading an options struct by its field table).
 #pragma once
 
+#include "demcal/common/field_table.hpp"
 #include "demcal/limits/limits.hpp"
 
 #include <Eigen/Core>
@@ -33,16 +34,18 @@ inline double relative_error(const std::vector<double>& absolute_errors, const s
   return spread > 0 ? std::accumulate(absolute_errors.begin(), absolute_errors.end(), 0.0) / spread : 0.0;
 }
 
-// Reads `json` key by key with set(options, key, value), which assigns one key and throws for an
-// unknown one; errors name `where`, the key and its value (a nested object's reader names its own
-// key). The result is validated (Validate()).
-template <class Options, class Set>
-Options options_from_json(const nlohmann::json& json, const std::string& where, Set set) {
+// Reads `json` key by key (in key order) with the field of `fields` of that name (its raw
+// reader, Field::read); errors name `where`, the key and its value (a nested object's reader names
+// its own key), an unknown key included. The result is validated (Validate()).
+template <class Options>
+Options options_from_json(const nlohmann::json& json, const std::string& where, const FieldTable<Options>& fields) {
   if (!json.is_object()) throw std::invalid_argument(where + ": must be an object");
   Options o;
   for (const auto& [key, value] : json.items()) {
     try {
-      set(o, key, value);
+      const Field<Options>* field = fields.find(key);
+      if (field == nullptr) throw std::invalid_argument("unknown key");
+      field->read(o, value, where);
     } catch (const std::exception& e) {
       const std::string located = where + "." + key, what = e.what();
       if (what.rfind(located, 0) == 0) throw;  // a nested object's reader has named it already

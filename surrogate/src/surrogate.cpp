@@ -141,30 +141,52 @@ void SurrogateOptions::Validate() const {
   mlp.Validate();
 }
 
-nlohmann::json SurrogateOptions::to_json() const {
-  return {{"kind", kind},         {"pool_factor", pool_factor}, {"k", k},
-          {"acquisition", to_string(acquisition)}, {"lcb_kappa", lcb_kappa}, {"min_runs", min_runs},
-          {"max_training_runs", max_training_runs}, {"batch", batch}, {"refit_growth", refit_growth},
-          {"cost_ratio", std::isfinite(cost_ratio) ? nlohmann::json(cost_ratio) : nlohmann::json("inf")},
-          {"gp", gp.to_json()}, {"mlp", mlp.to_json()}};
+namespace {
+
+// "cost_ratio": a number, or "inf" (never adapt).
+const FieldTable<SurrogateOptions>& surrogate_fields() {
+  static const FieldTable<SurrogateOptions> table{
+      field("kind", &SurrogateOptions::kind),
+      field("pool_factor", &SurrogateOptions::pool_factor),
+      field("k", &SurrogateOptions::k),
+      named_field("acquisition", &SurrogateOptions::acquisition, parse_acquisition,
+                  [](Acquisition a) { return to_string(a); }),
+      field("lcb_kappa", &SurrogateOptions::lcb_kappa),
+      field("min_runs", &SurrogateOptions::min_runs),
+      field("max_training_runs", &SurrogateOptions::max_training_runs),
+      field("batch", &SurrogateOptions::batch),
+      field("refit_growth", &SurrogateOptions::refit_growth),
+      custom_field<SurrogateOptions>(
+          "cost_ratio",
+          [](SurrogateOptions& o, const nlohmann::json& value, const std::string&) {
+            o.cost_ratio = value == "inf" ? HUGE_VAL : value.get<double>();
+          },
+          [](const SurrogateOptions& o) -> std::optional<nlohmann::json> {
+            return std::isfinite(o.cost_ratio) ? nlohmann::json(o.cost_ratio) : nlohmann::json("inf");
+          }),
+      custom_field<SurrogateOptions>(
+          "gp",
+          [](SurrogateOptions& o, const nlohmann::json& value, const std::string& where) {
+            o.gp = GpOptions::from_json(value, where + ".gp");
+          },
+          [](const SurrogateOptions& o) -> std::optional<nlohmann::json> { return o.gp.to_json(); }),
+      custom_field<SurrogateOptions>(
+          "mlp",
+          [](SurrogateOptions& o, const nlohmann::json& value, const std::string& where) {
+            o.mlp = MlpOptions::from_json(value, where + ".mlp");
+          },
+          [](const SurrogateOptions& o) -> std::optional<nlohmann::json> { return o.mlp.to_json(); }),
+  };
+  return table;
 }
 
+}  // namespace
+
+// threads is left out: results do not depend on it.
+nlohmann::json SurrogateOptions::to_json() const { return surrogate_fields().to_json(*this); }
+
 SurrogateOptions SurrogateOptions::from_json(const nlohmann::json& j, const std::string& where) {
-  return detail::options_from_json<SurrogateOptions>(j, where, [&](auto& o, const std::string& key, const nlohmann::json& value) {
-    if (key == "kind") o.kind = value.get<std::string>();
-    else if (key == "pool_factor") o.pool_factor = value.get<int>();
-    else if (key == "k") o.k = value.get<int>();
-    else if (key == "acquisition") o.acquisition = parse_acquisition(value.get<std::string>());
-    else if (key == "lcb_kappa") o.lcb_kappa = value.get<double>();
-    else if (key == "min_runs") o.min_runs = value.get<int>();
-    else if (key == "max_training_runs") o.max_training_runs = value.get<int>();
-    else if (key == "batch") o.batch = value.get<int>();
-    else if (key == "refit_growth") o.refit_growth = value.get<double>();
-    else if (key == "cost_ratio") o.cost_ratio = value == "inf" ? HUGE_VAL : value.get<double>();
-    else if (key == "gp") o.gp = GpOptions::from_json(value, where + ".gp");
-    else if (key == "mlp") o.mlp = MlpOptions::from_json(value, where + ".mlp");
-    else throw std::invalid_argument("unknown key");
-  });
+  return detail::options_from_json(j, where, surrogate_fields());
 }
 
 std::vector<TrainingRow> select_training_rows(const std::vector<TrainingRow>& rows, int max_rows) {

@@ -31,6 +31,7 @@
 // file's units row, else SI is assumed.
 #pragma once
 
+#include "demcal/common/field_table.hpp"
 #include "demcal/dem/scene.hpp"
 #include "demcal/optimise/optimiser.hpp"
 #include "demcal/optimise/parameter_space.hpp"
@@ -168,6 +169,10 @@ struct CampaignConfig {
 CampaignConfig campaign_from_json(const nlohmann::json& json, const std::string& base_dir,
                                   const std::string& source);
 CampaignConfig load_campaign(const std::string& path);
+// The campaign file's "optimiser" keys (demcal/common/field_table.hpp): how each OptimiserOptions
+// field a campaign sets is checked, read and written. Those with a help text are also the flags of
+// `demcal optimise` (--algorithm, --seed, --trust-direction, ...).
+const FieldTable<optimise::OptimiserOptions>& optimiser_fields();
 
 // The "kind" of a surrogate model file (demcal surrogate train); "" when the file cannot be read as
 // one (the campaign reports that when it loads the model). A campaign given a model takes its kind.
