@@ -416,11 +416,12 @@ TEST(Campaign, MpiBackendGivesTheThreadsResult) {
   ASSERT_TRUE(threads.ok()) << threads.message;
   std::vector<std::string> mpirun = {"mpirun", "--oversubscribe", "-n", "3"};
 #ifdef DEMCAL_SANITIZED
-  // OpenMPI's start-up allocations live until exit; LeakSanitizer is told to skip them by library
-  // name, which needs the slow unwinder to see those frames (tests/sanitize/openmpi-lsan.supp).
+  // The ranks run with AddressSanitizer and UBSan but without the leak check: LeakSanitizer's tracer
+  // dies at the exit of an OpenMPI process on some runs ("Tracer caught signal 11": 5 of 8 runs on
+  // the development machine, docs/hardening.md). The threads backend's run above checks the same
+  // campaign for leaks.
   const char* outer = std::getenv("ASAN_OPTIONS");
-  mpirun.insert(mpirun.end(), {"-x", std::string("ASAN_OPTIONS=") + (outer ? std::string(outer) + ":" : "") + "fast_unwind_on_malloc=0",
-                               "-x", "LSAN_OPTIONS=suppressions=" + std::string(DEMCAL_SOURCE_DIR) + "/tests/sanitize/openmpi-lsan.supp"});
+  mpirun.insert(mpirun.end(), {"-x", std::string("ASAN_OPTIONS=") + (outer ? std::string(outer) + ":" : "") + "detect_leaks=0"});
 #endif
   const auto mpi = run(mpirun, "mpi", "mpi");
   ASSERT_TRUE(mpi.ok()) << mpi.message;
