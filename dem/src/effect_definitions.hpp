@@ -6,8 +6,9 @@
 // The contact law's arithmetic of the joint-group effects is in inline headers beside them
 // (effect_<name>_law.hpp), which the contact law (contact_law.hpp) composes in its per-node order:
 // the law is the engine's inner loop, so it calls them directly, with no virtual call or
-// std::function per contact node. The other effects act in the integrator (simulation.cpp): the
-// support and beam springs, and the gap joint's node gaps.
+// std::function per contact node, and its node loop compiles to the same instructions as with the
+// arithmetic written in the contact law (docs/engine.md, "One file per effect"). The other effects
+// act in the integrator (simulation.cpp): the support and beam springs, and the gap joint's gaps.
 #pragma once
 
 #include "demcal/common/format.hpp"
