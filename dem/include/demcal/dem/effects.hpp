@@ -89,17 +89,17 @@ struct FittedEffect {
 
 // One numeric value an effect adds to a scene, declared once in the effect's file. Scene files
 // (scene_from_json, scene_to_json), Scene::Validate, set_parameter / get_parameter /
-// parameter_names and the generators' EffectOptions all loop over these declarations, and name
-// none of them. The value lives in one of three hosts, told by which of the pointers below is set:
+// parameter_names, the generators' EffectOptions and `demcal scene` all loop over these
+// declarations, and name none of them. The value lives in one of three hosts, told by which of the pointers below is set:
 //   a joint group's JointMaterial: key in the group's object; set_parameter "<name>" sets every
 //     group, "<group>.<name>" one;
 //   a Block: key in the block's object; "<block>.<name>", or bare for the effect's default blocks
 //     (EffectTarget::support_blocks: every fixed block; beam_block: the loaded block);
 //   the scene's JointGap: key in the object "joint_gap"; bare names only.
 struct SceneField {
-  std::string name;      // set_parameter's field and the generator option ("closure_max", "gap_opening")
-  std::string json_key{};  // key in the host's JSON object when it differs from `name` ("opening")
-  std::string unit;      // SI, "deg", "1": as EffectParameter::unit
+  std::string name;        // set_parameter's field and the generator option ("closure_max", "gap_opening")
+  std::string json_key{};  // key in the host's JSON object where it differs from `name` ("opening")
+  std::string unit;        // SI, "deg", "1": as EffectParameter::unit
   double JointMaterial::*material = nullptr;
   double Block::*block = nullptr;
   double JointGap::*gap = nullptr;
