@@ -17,7 +17,11 @@ Effect cohesion() {
             EffectParameter{"tensile_strength", "Pa", "tensile strength of the bond", 0, kMaxBondStrength, 1e3, 1e6,
                             true, 5e4}}};
   e.scene_fields = {
-      {.name = "cohesion", .unit = "Pa", .material = &JointMaterial::cohesion, .upper = kMaxBondStrength, .reason = "Pa"},
+      {.name = "cohesion",
+       .unit = "Pa",
+       .material = &JointMaterial::cohesion,
+       .upper = kMaxBondStrength,
+       .reason = "Pa"},
       {.name = "tensile_strength",
        .unit = "Pa",
        .material = &JointMaterial::tensile_strength,

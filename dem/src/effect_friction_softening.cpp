@@ -59,9 +59,13 @@ Effect friction_softening() {
                      .upper = 90,
                      .bounded_by_rule = true,
                      .clears = &JointMaterial::friction_residual},
-                    {.name = "slip_softening", .unit = "m", .material = &JointMaterial::slip_softening, .written = softening_written}};
-  e.flags = {{"friction_residual_deg", "--friction-residual-deg", "friction-softening: residual friction angle (degrees)"},
-             {"slip_softening", "--slip-softening", "friction-softening: slip to the residual friction (m)"}};
+                    {.name = "slip_softening",
+                     .unit = "m",
+                     .material = &JointMaterial::slip_softening,
+                     .written = softening_written}};
+  e.flags = {
+      {"friction_residual_deg", "--friction-residual-deg", "friction-softening: residual friction angle (degrees)"},
+      {"slip_softening", "--slip-softening", "friction-softening: slip to the residual friction (m)"}};
   e.check_material = check_residual;
   e.enabled = [](const Scene& scene) { return any_joint_group(scene, &JointMaterial::softening_on); };
   e.finding = [](const FittedEffect& fit) -> std::string {

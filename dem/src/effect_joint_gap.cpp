@@ -40,7 +40,10 @@ Effect joint_gap() {
        .lower = -JointGap::kMaxTaper,
        .upper = JointGap::kMaxTaper,
        .reason = "beyond 1 it equals 1"}};
-  e.flags = {{"gap_joint", "--gap-joint", "joint-gap: the joint, as blockA/blockB", "", true},
+  e.flags = {{.option = "gap_joint",
+              .flag = "--gap-joint",
+              .help = "joint-gap: the joint, as blockA/blockB",
+              .names_target = true},
              {"gap_intrados", "--gap-intrados", "joint-gap: opening at the lower (intrados) end (m)"},
              {"gap_extrados", "--gap-extrados", "joint-gap: opening at the upper (extrados) end (m)"}};
   e.enabled = [](const Scene& scene) { return scene.joint_gap.on(); };

@@ -19,10 +19,13 @@ Effect support_compliance() {
   e.flags = {{"support_kx", "--support-kx", "support-compliance: horizontal support spring (N/m)"},
              {"support_ky", "--support-ky", "support-compliance: vertical support spring (N/m)"},
              {"support_kr", "--support-kr", "support-compliance: rotational support spring (N m/rad)"},
-             {"support_blocks", "--support-blocks",
-              "support-compliance: comma-separated supports (default: every fixed block, {fixed blocks})", "", true}};
-  e.block_texts = {"support springs (support_kx, support_ky, support_kr) apply to fixed blocks only",
-                   "support springs need a fixed block", "the scene has no fixed block"};
+             {.option = "support_blocks",
+              .flag = "--support-blocks",
+              .help = "support-compliance: comma-separated supports (default: every fixed block, {fixed blocks})",
+              .names_target = true}};
+  e.block_texts = {.misplaced = "support springs (support_kx, support_ky, support_kr) apply to fixed blocks only",
+                   .needs = "support springs need a fixed block",
+                   .no_default = "the scene has no fixed block"};
   e.enabled = [](const Scene& scene) {
     return std::any_of(scene.blocks.begin(), scene.blocks.end(), [](const Block& b) { return b.compliant_support(); });
   };

@@ -490,7 +490,8 @@ void read_joint_gap(const ObjectReader& c, JointGap& gap) {
   } else {
     std::vector<double> values;
     for (const SceneField* f : derived) values.push_back(c.number(f->key(), 0));
-    for (std::size_t i = 0; i < derived.size(); ++i) check_limits(*derived[i], values[i], c.key_path(derived[i]->key()));
+    for (std::size_t i = 0; i < derived.size(); ++i)
+      check_limits(*derived[i], values[i], c.key_path(derived[i]->key()));
     for (std::size_t i = 0; i < derived.size(); ++i) derived[i]->set_gap(gap, values[i]);
   }
 }

@@ -90,7 +90,8 @@ struct FittedEffect {
 // One numeric value an effect adds to a scene, declared once in the effect's file. Scene files
 // (scene_from_json, scene_to_json), Scene::Validate, set_parameter / get_parameter /
 // parameter_names, the generators' EffectOptions and `demcal scene` all loop over these
-// declarations, and name none of them. The value lives in one of three hosts, told by which of the pointers below is set:
+// declarations, and name none of them. The value lives in one of three hosts, told by which of the
+// pointers below is set:
 //   a joint group's JointMaterial: key in the group's object; set_parameter "<name>" sets every
 //     group, "<group>.<name>" one;
 //   a Block: key in the block's object; "<block>.<name>", or bare for the effect's default blocks
