@@ -3,6 +3,11 @@
 // EffectLaw with its per-node history when a group has any effect of JointMaterial on.
 #pragma once
 
+#include "effect_cohesion_law.hpp"
+#include "effect_crushing_cap_law.hpp"
+#include "effect_friction_softening_law.hpp"
+#include "effect_joint_closure_law.hpp"
+
 #include "demcal/dem/scene.hpp"
 
 #include <algorithm>
@@ -63,44 +68,23 @@ struct NodeHistory {
   bool bonded = false;         // an unbroken bond (cohesion); set for nodes present at the start
 };
 
-// Mohr-Coulomb with the joint-group effects of JointMaterial: hyperbolic closure, friction
-// softening with slip, brittle cohesion and tension, and a crushing cap with softening.
-// Order per node: elastic closure = penetration - plastic closure; normal force from the closure
+// Mohr-Coulomb with the joint-group effects of JointMaterial, each effect's arithmetic from its
+// header beside it (effect_<name>_law.hpp): hyperbolic closure, friction softening with slip,
+// brittle cohesion and tension, and a crushing cap with softening. They are composed here, in the
+// order per node: elastic closure = penetration - plastic closure; normal force from the closure
 // law (tension allowed only while bonded); the crushing cap; the tension bond check; then the
-// shear trial against c A (bonded) + tan(phi(slip)) Fn, breaking the bond when exceeded.
+// shear trial against c A (bonded) + tan(phi(slip)) Fn, breaking the bond when exceeded. Direct
+// inline calls, as this is the engine's inner loop: the node loop (Engine::process_nodes) compiles
+// to the same instructions as with the arithmetic written here, only the members' offsets differ.
 class EffectLaw {
  public:
   explicit EffectLaw(const JointMaterial& m)
-      : kn_(m.normal_stiffness),
-        ks_(m.shear_stiffness),
-        tan_peak_(std::tan(m.friction_angle)),
-        tan_residual_(std::tan(m.residual_friction())),
-        slip_softening_(m.slip_softening),
-        closure_max_(m.closure_max),
-        cohesion_(m.cohesion),
-        tensile_strength_(m.tensile_strength),
-        compressive_strength_(m.compressive_strength),
-        crushing_softening_(m.crushing_softening) {
-    if (closure_max_ > 0) {
-      closure_switch_ = closure_max_ * (1 - 1 / std::sqrt(JointMaterial::kClosureStiffening));
-      stress_switch_ = kn_ * closure_switch_ / (1 - closure_switch_ / closure_max_);
-    }
-  }
+      : ks_(m.shear_stiffness), closure_(m), softening_(m), bond_(m), cap_(m) {}
 
-  bool bonds() const { return cohesion_ > 0 || tensile_strength_ > 0; }
+  bool bonds() const { return bond_.on(); }
 
-  // Normal stress (Pa) for an elastic closure d (m); tension (d < 0) stays linear.
-  double normal_stress(double d) const {
-    if (closure_max_ <= 0 || d <= 0) return kn_ * d;
-    if (d <= closure_switch_) return kn_ * d / (1 - d / closure_max_);
-    return stress_switch_ + JointMaterial::kClosureStiffening * kn_ * (d - closure_switch_);
-  }
-  // Inverse of normal_stress for a compressive stress s >= 0.
-  double elastic_closure(double s) const {
-    if (closure_max_ <= 0) return s / kn_;
-    if (s <= stress_switch_) return s / (kn_ + s / closure_max_);
-    return closure_switch_ + (s - stress_switch_) / (JointMaterial::kClosureStiffening * kn_);
-  }
+  // Normal stress (Pa) for an elastic closure d (m) (ClosureLaw).
+  double normal_stress(double d) const { return closure_.normal_stress(d); }
 
   NodeForces evaluate(const NodeKinematics& k, double& shear_state, NodeHistory& h) const {
     NodeForces f;
@@ -109,18 +93,15 @@ class EffectLaw {
       shear_state = 0;
       return f;
     }
-    double stress = normal_stress(elastic);
-    if (compressive_strength_ > 0 && stress > 0) {
-      const double strength =
-          crushing_softening_ > 0
-              ? compressive_strength_ * std::max(0.0, 1 - h.plastic_closure / crushing_softening_)
-              : compressive_strength_;
+    double stress = closure_.normal_stress(elastic);
+    if (cap_.on() && stress > 0) {
+      const double strength = cap_.strength(h.plastic_closure);
       if (stress > strength) {  // crushing: the elastic part holds the strength, the rest is permanent
         stress = strength;
-        h.plastic_closure = k.penetration - elastic_closure(strength);
+        h.plastic_closure = k.penetration - closure_.elastic_closure(strength);
       }
     }
-    if (h.bonded && stress < -tensile_strength_) h.bonded = false;
+    if (h.bonded && bond_.fails_in_tension(stress)) h.bonded = false;
     if (!h.bonded && stress <= 0) {
       shear_state = 0;
       return f;
@@ -128,10 +109,8 @@ class EffectLaw {
     f.normal = stress * k.area;
     const double ks_area = ks_ * k.area;
     const double trial = shear_state - ks_area * k.shear_increment;
-    double tan_phi = tan_peak_;
-    if (slip_softening_ > 0)
-      tan_phi = tan_residual_ + (tan_peak_ - tan_residual_) * std::max(0.0, 1 - h.slip / slip_softening_);
-    double limit = tan_phi * f.normal + (h.bonded ? cohesion_ * k.area : 0.0);
+    const double tan_phi = softening_.tan_friction(h.slip);
+    double limit = tan_phi * f.normal + (h.bonded ? bond_.cohesive_force(k.area) : 0.0);
     if (h.bonded && std::abs(trial) > limit) {  // the bond fails in shear: plain friction from now on
       h.bonded = false;
       if (f.normal <= 0) {
@@ -152,9 +131,11 @@ class EffectLaw {
   }
 
  private:
-  double kn_, ks_, tan_peak_, tan_residual_, slip_softening_, closure_max_;
-  double cohesion_, tensile_strength_, compressive_strength_, crushing_softening_;
-  double closure_switch_ = 0, stress_switch_ = 0;
+  double ks_;
+  ClosureLaw closure_;
+  FrictionSoftening softening_;
+  BondLaw bond_;
+  CrushingCap cap_;
 };
 
 }  // namespace demcal::dem

@@ -1,7 +1,14 @@
 // The effects of effects.hpp, one file each (effect_<name>.cpp): its parameters with units, bounds
-// and search ranges, whether a scene has it on, and its finding in a verdict. The law itself is
-// the scene's (scene.hpp) and the contact law's. A new effect is one more file and one line in
-// effects.cpp's registry.
+// and search ranges, its values in a scene (SceneField: file keys, where each lives, limits), its
+// generator options and `demcal scene` flags, its rules, whether a scene has it on, and its finding
+// in a verdict. A new effect is one more file and one line in effects.cpp's registry.
+//
+// The contact law's arithmetic of the joint-group effects is in inline headers beside them
+// (effect_<name>_law.hpp), which the contact law (contact_law.hpp) composes in its per-node order:
+// the law is the engine's inner loop, so it calls them directly, with no virtual call or
+// std::function per contact node, and its node loop compiles to the same instructions as with the
+// arithmetic written in the contact law (docs/engine.md, "One file per effect"). The other effects
+// act in the integrator (simulation.cpp): the support and beam springs, and the gap joint's gaps.
 #pragma once
 
 #include "demcal/common/format.hpp"
@@ -9,10 +16,12 @@
 
 #include <algorithm>
 #include <limits>
+#include <numbers>
 
 namespace demcal::dem::effects {
 
 inline constexpr double kInf = std::numeric_limits<double>::infinity();
+inline constexpr double kDegree = std::numbers::pi / 180.0;
 
 // Whether any joint group of `scene` has the law `on` switched on (JointMaterial::closure_on, ...).
 inline bool any_joint_group(const Scene& scene, bool (JointMaterial::*on)() const) {

@@ -1,4 +1,5 @@
-// support-compliance: a support on elastic springs instead of rigid (Block::support_kx, ky, kr).
+// support-compliance: a support on elastic springs instead of rigid (Block::support_kx, ky, kr; the
+// law: the springs of the integrator, simulation.cpp).
 #include "effect_definitions.hpp"
 
 #include <algorithm>
@@ -12,6 +13,19 @@ Effect support_compliance() {
             EffectParameter{"support_ky", "N/m", "vertical spring of the support", 0, kInf, 1e6, 1e10, true, 1e8},
             EffectParameter{"support_kr", "N m/rad", "rotational spring of the support about its centroid", 0, kInf,
                             1e5, 1e9, true, 1e7}}};
+  e.scene_fields = {{.name = "support_kx", .unit = "N/m", .block = &Block::support_kx},
+                    {.name = "support_ky", .unit = "N/m", .block = &Block::support_ky},
+                    {.name = "support_kr", .unit = "N m/rad", .block = &Block::support_kr}};
+  e.flags = {{"support_kx", "--support-kx", "support-compliance: horizontal support spring (N/m)"},
+             {"support_ky", "--support-ky", "support-compliance: vertical support spring (N/m)"},
+             {"support_kr", "--support-kr", "support-compliance: rotational support spring (N m/rad)"},
+             {.option = "support_blocks",
+              .flag = "--support-blocks",
+              .help = "support-compliance: comma-separated supports (default: every fixed block, {fixed blocks})",
+              .names_target = true}};
+  e.block_texts = {.misplaced = "support springs (support_kx, support_ky, support_kr) apply to fixed blocks only",
+                   .needs = "support springs need a fixed block",
+                   .no_default = "the scene has no fixed block"};
   e.enabled = [](const Scene& scene) {
     return std::any_of(scene.blocks.begin(), scene.blocks.end(), [](const Block& b) { return b.compliant_support(); });
   };

@@ -1,5 +1,7 @@
 #include "demcal/dem/generators.hpp"
 
+#include "demcal/dem/effects.hpp"
+
 #include "demcal/limits/limits.hpp"
 
 #include <algorithm>
@@ -72,44 +74,66 @@ Vec2 centroid_of(const Block& b) {
   return c / static_cast<double>(b.vertices.size());
 }
 
+// Refuses an option name that no effect declares (Effect::flags) rather than leave it unread.
+void check_effect_option_names(const EffectOptions& e) {
+  const auto declared = [](const std::string& option, bool target) {
+    for (const Effect& effect : effect_registry())
+      for (const EffectFlag& f : effect.flags)
+        if (f.option == option && f.names_target == target) return true;
+    return false;
+  };
+  for (const auto& [option, value] : e.values)
+    if (!declared(option, false)) throw SceneError("effect option '" + option + "'", "no effect declares it");
+  for (const auto& [option, text] : e.targets)
+    if (!declared(option, true)) throw SceneError("effect option '" + option + "'", "no effect declares it");
+}
+
+// The blocks of a comma-separated list, each as a parameter prefix ("abutment_right."); none: {""},
+// the bare names.
+std::vector<std::string> block_prefixes(const std::string& list) {
+  std::vector<std::string> prefixes;
+  for (std::size_t from = 0; from <= list.size();) {
+    const std::size_t comma = std::min(list.find(',', from), list.size());
+    if (comma > from) prefixes.push_back(list.substr(from, comma - from) + ".");
+    from = comma + 1;
+  }
+  if (prefixes.empty()) prefixes.push_back("");
+  return prefixes;
+}
+
 }  // namespace
 
+// Each effect's options together: once any of its values is not 0, every one is set, for each of
+// its target blocks (none: bare names) or at its joint, in the order the effect declares them.
 void apply_effects(Scene& s, const EffectOptions& e) {
-  const auto set_if = [&s](const char* name, double value) {
-    if (value != 0) set_parameter(s, name, value);
-  };
-  set_if("closure_max", e.closure_max);
-  if (e.slip_softening != 0 || e.friction_residual_deg != 0) {
-    set_parameter(s, "friction_residual_deg", e.friction_residual_deg);
-    set_parameter(s, "slip_softening", e.slip_softening);
-  }
-  set_if("cohesion", e.cohesion);
-  set_if("tensile_strength", e.tensile_strength);
-  set_if("compressive_strength", e.compressive_strength);
-  set_if("crushing_softening", e.crushing_softening);
-  if (e.support_kx != 0 || e.support_ky != 0 || e.support_kr != 0) {
-    std::vector<std::string> blocks;
-    for (std::size_t from = 0; from <= e.support_blocks.size();) {
-      const std::size_t comma = std::min(e.support_blocks.find(',', from), e.support_blocks.size());
-      if (comma > from) blocks.push_back(e.support_blocks.substr(from, comma - from));
-      from = comma + 1;
+  check_effect_option_names(e);
+  for (const Effect& effect : effect_registry()) {
+    std::string target, target_flag, value_flags;
+    std::vector<std::pair<std::string, double>> values;
+    bool any_on = false;
+    for (const EffectFlag& f : effect.flags) {
+      if (f.names_target) {
+        if (e.targets.count(f.option)) target = e.targets.at(f.option);
+        target_flag = f.flag;
+        continue;
+      }
+      const double value = e.values.count(f.option) ? e.values.at(f.option) : 0.0;
+      values.emplace_back(f.option, value);
+      any_on = any_on || value != 0;
+      value_flags += (value_flags.empty() ? "" : "/") + f.flag;
     }
-    if (blocks.empty()) blocks.push_back("");  // bare names: every fixed block
-    for (const auto& b : blocks) {
-      const std::string prefix = b.empty() ? "" : b + ".";
-      set_parameter(s, prefix + "support_kx", e.support_kx);
-      set_parameter(s, prefix + "support_ky", e.support_ky);
-      set_parameter(s, prefix + "support_kr", e.support_kr);
+    if (effect.target == EffectTarget::joint) {
+      if (!target.empty())
+        s.joint_gap.joint = target;
+      else if (any_on)
+        throw SceneError(value_flags, "need " + target_flag + " to name the joint");
     }
+    if (!any_on) continue;
+    const std::vector<std::string> prefixes =
+        effect.target == EffectTarget::joint ? std::vector<std::string>{""} : block_prefixes(target);
+    for (const auto& prefix : prefixes)
+      for (const auto& [option, value] : values) set_parameter(s, prefix + option, value);
   }
-  if (!e.gap_joint.empty()) {
-    s.joint_gap.joint = e.gap_joint;
-    set_parameter(s, "gap_intrados", e.gap_intrados);
-    set_parameter(s, "gap_extrados", e.gap_extrados);
-  } else if (e.gap_intrados != 0 || e.gap_extrados != 0) {
-    throw SceneError("--gap-intrados/--gap-extrados", "need --gap-joint to name the joint");
-  }
-  set_if("beam_kr", e.beam_kr);
   s.Validate(s.name);
 }
 

@@ -1,6 +1,9 @@
 #include "demcal/dem/scene.hpp"
 
 #include "geometry.hpp"
+#include "scene_checks.hpp"
+
+#include "demcal/dem/effects.hpp"
 
 #include "demcal/common/format.hpp"
 #include "demcal/limits/limits.hpp"
@@ -24,17 +27,6 @@ namespace {
 
 constexpr double kDegree = std::numbers::pi / 180.0;
 
-void require_finite(double v, const std::string& where) {
-  if (!std::isfinite(v)) throw SceneError(where, "value is not a finite number (" + format_number(v, 10) + ")");
-}
-void require_positive(double v, const std::string& where) {
-  require_finite(v, where);
-  if (v <= 0) throw SceneError(where, "must be positive, got " + format_number(v, 10));
-}
-void require_non_negative(double v, const std::string& where) {
-  require_finite(v, where);
-  if (v < 0) throw SceneError(where, "must not be negative, got " + format_number(v, 10));
-}
 void require_unit(const Vec2& v, const std::string& where) {
   require_finite(v.x(), where);
   require_finite(v.y(), where);
@@ -105,22 +97,49 @@ json vec2_json(const Vec2& v) { return json::array({v.x(), v.y()}); }
 
 namespace {
 
-// Physical bounds of the effect parameters (documented in docs/scene-format.md).
-constexpr double kMaxClosure = 0.01;          // m: rough-joint closures are micrometres to a millimetre
-constexpr double kMaxBondStrength = 1e8;      // Pa: no masonry bond carries 100 MPa
-constexpr double kMaxCompressiveStrength = 1e9;  // Pa: stronger than any stone
+// The effects' values (SceneField, effects.hpp), read, written, checked and set here by their
+// declarations, in the order of the registry.
 
-void require_at_most(double v, double bound, const std::string& where, const std::string& why) {
-  require_non_negative(v, where);
-  if (v > bound) throw SceneError(where, "must be at most " + format_number(bound, 10) + " (" + why + "), got " + format_number(v, 10));
+// Calls f(effect, field) for every field the effects declare.
+template <class F>
+void for_each_effect_field(F f) {
+  for (const Effect& effect : effect_registry())
+    for (const SceneField& field : effect.scene_fields) f(effect, field);
 }
 
-// An angle of the friction law (rad) in [0, friction_angle]; the upper limit only where `capped`.
-void require_within_friction(double angle, double friction_angle, bool capped, const std::string& where) {
-  require_finite(angle, where);
-  if (angle < 0 || (capped && angle > friction_angle))
-    throw SceneError(where, "must be in [0, friction_deg = " + format_number(friction_angle / kDegree, 10) +
-                                "] degrees, got " + format_number(angle / kDegree, 10));
+// A value as the file and set_parameter give it, and as the scene holds it.
+double given_value(const SceneField& field, double held) { return field.degrees ? held / kDegree : held; }
+double held_value(const SceneField& field, double given) { return field.degrees ? given * kDegree : given; }
+
+// A value (as given) within its field's limits, else SceneError at `where`.
+void check_limits(const SceneField& field, double v, const std::string& where) {
+  if (field.lower == 0) {
+    require_non_negative(v, where);
+    if (v > field.upper)
+      throw SceneError(where, "must be at most " + format_number(field.upper, 10) + " (" + field.reason + "), got " +
+                                  format_number(v, 10));
+    return;
+  }
+  require_finite(v, where);
+  if (v < field.lower || v > field.upper)
+    throw SceneError(where, "must be in [" + format_number(field.lower, 10) + ", " + format_number(field.upper, 10) +
+                                "] (" + field.reason + "), got " + format_number(v, 10));
+}
+
+// Whether any of the effect's block values is on (> 0) at `block`.
+bool effect_on_block(const Effect& effect, const Block& block) {
+  return std::any_of(effect.scene_fields.begin(), effect.scene_fields.end(),
+                     [&](const SceneField& f) { return f.block && block.*f.block > 0; });
+}
+
+// The joint gap's fields, stored (the opening and taper) or derived (its ends).
+bool on_gap(const SceneField& f) { return f.gap || f.derived(); }
+std::vector<const SceneField*> gap_fields(bool derived) {
+  std::vector<const SceneField*> fields;
+  for_each_effect_field([&](const Effect&, const SceneField& f) {
+    if (on_gap(f) && f.derived() == derived) fields.push_back(&f);
+  });
+  return fields;
 }
 
 }  // namespace
@@ -137,18 +156,12 @@ void JointMaterial::Validate(const std::string& where) const {
   if (friction_angle < 0 || friction_angle >= std::numbers::pi / 2)
     throw SceneError(where + ".friction_deg",
                      "must be in [0, 90) degrees, got " + format_number(friction_angle / kDegree, 10));
-  require_at_most(closure_max, kMaxClosure, where + ".closure_max", "m; a rough joint closes by at most millimetres");
-  require_non_negative(slip_softening, where + ".slip_softening");
-  require_within_friction(friction_residual, friction_angle, softening_on(), where + ".friction_residual_deg");
-  require_within_friction(friction_loss, friction_angle, true, where + ".friction_loss_deg");
-  if (friction_loss > 0 && friction_residual != 0)
-    throw SceneError(where + ".friction_loss_deg", "set friction_residual_deg or friction_loss_deg, not both (got " +
-                                                       format_number(friction_residual / kDegree, 10) + " and " +
-                                                       format_number(friction_loss / kDegree, 10) + " degrees)");
-  require_at_most(cohesion, kMaxBondStrength, where + ".cohesion", "Pa");
-  require_at_most(tensile_strength, kMaxBondStrength, where + ".tensile_strength", "Pa");
-  require_at_most(compressive_strength, kMaxCompressiveStrength, where + ".compressive_strength", "Pa");
-  require_non_negative(crushing_softening, where + ".crushing_softening");
+  // Each effect's values, then its rules across them.
+  for (const Effect& effect : effect_registry()) {
+    for (const SceneField& f : effect.scene_fields)
+      if (f.material && !f.bounded_by_rule) check_limits(f, given_value(f, this->*f.material), where + "." + f.key());
+    if (effect.check_material) effect.check_material(*this, where);
+  }
 }
 
 int Scene::block_index(const std::string& block_name) const {
@@ -193,16 +206,19 @@ void validate_block_polygon(const Block& b, const std::string& where) {
   if (!geometry::is_convex_ccw(b.vertices)) throw SceneError(where + ".vertices", "the polygon is not convex");
 }
 
-// Support springs hold fixed blocks only; a rotational restraint, free blocks only.
-void validate_block_springs(const Block& b, const std::string& where) {
-  require_non_negative(b.support_kx, where + ".support_kx");
-  require_non_negative(b.support_ky, where + ".support_ky");
-  require_non_negative(b.support_kr, where + ".support_kr");
-  require_non_negative(b.beam_kr, where + ".beam_kr");
-  if (!b.fixed && (b.support_kx > 0 || b.support_ky > 0 || b.support_kr > 0))
-    throw SceneError(where, "support springs (support_kx, support_ky, support_kr) apply to fixed blocks only");
-  if (b.fixed && b.beam_kr > 0)
-    throw SceneError(where + ".beam_kr", "a rotational restraint applies to a free block, not a fixed one");
+// The effects' values of a block, then where they apply: EffectTarget::support_blocks to fixed
+// blocks only, beam_block to free blocks only.
+void validate_block_effects(const Block& b, const std::string& where) {
+  for_each_effect_field([&](const Effect&, const SceneField& f) {
+    if (f.block) check_limits(f, b.*f.block, where + "." + f.key());
+  });
+  for (const Effect& effect : effect_registry()) {
+    if (effect.target != EffectTarget::support_blocks && effect.target != EffectTarget::beam_block) continue;
+    if (b.fixed == (effect.target == EffectTarget::support_blocks) || !effect_on_block(effect, b)) continue;
+    // at the value where the effect has one, at the block where the message lists them
+    const auto& fields = effect.scene_fields;
+    throw SceneError(fields.size() == 1 ? where + "." + fields.front().key() : where, effect.block_texts.misplaced);
+  }
 }
 
 void validate_blocks(const std::vector<Block>& blocks, const std::string& s) {
@@ -215,7 +231,7 @@ void validate_blocks(const std::vector<Block>& blocks, const std::string& s) {
     if (!names.insert(b.name).second) throw SceneError(where, "duplicate block name");
     require_positive(b.density, where + ".density");
     validate_block_polygon(b, where);
-    validate_block_springs(b, where);
+    validate_block_effects(b, where);
     any_free = any_free || !b.fixed;
   }
   if (!any_free) throw SceneError(s + "blocks", "every block is fixed: nothing can move");
@@ -246,12 +262,7 @@ void validate_joint_gap(const Scene& scene, const std::string& s) {
   Vec2 p, q;
   if (!geometry::shared_edge(scene.blocks[ia].vertices, scene.blocks[ib].vertices, p, q))
     throw SceneError(where + ".joint", "blocks of '" + joint_gap.joint + "' share no edge at the start");
-  require_at_most(joint_gap.opening, JointGap::kMaxOpening, where + ".opening", "m; a fit imperfection");
-  require_finite(joint_gap.taper, where + ".taper");
-  if (std::abs(joint_gap.taper) > JointGap::kMaxTaper)
-    throw SceneError(where + ".taper", "must be in [-" + format_number(JointGap::kMaxTaper, 10) + ", " +
-                                           format_number(JointGap::kMaxTaper, 10) + "] (beyond 1 it equals 1), got " +
-                                           format_number(joint_gap.taper, 10));
+  for (const SceneField* f : gap_fields(false)) check_limits(*f, joint_gap.*f->gap, where + "." + f->key());
 }
 
 void validate_contact(const ContactSettings& contact, const std::string& s) {
@@ -355,14 +366,9 @@ JointMaterial read_joint_material(const ObjectReader& g) {
   m.normal_stiffness = g.number("kn");
   m.shear_stiffness = g.number("ks");
   m.friction_angle = g.number("friction_deg") * kDegree;
-  m.closure_max = g.number("closure_max", m.closure_max);
-  m.friction_residual = g.number("friction_residual_deg", m.friction_residual / kDegree) * kDegree;
-  m.friction_loss = g.number("friction_loss_deg", m.friction_loss / kDegree) * kDegree;
-  m.slip_softening = g.number("slip_softening", m.slip_softening);
-  m.cohesion = g.number("cohesion", m.cohesion);
-  m.tensile_strength = g.number("tensile_strength", m.tensile_strength);
-  m.compressive_strength = g.number("compressive_strength", m.compressive_strength);
-  m.crushing_softening = g.number("crushing_softening", m.crushing_softening);
+  for_each_effect_field([&](const Effect&, const SceneField& f) {
+    if (f.material) m.*f.material = held_value(f, g.number(f.key(), given_value(f, m.*f.material)));
+  });
   return m;
 }
 
@@ -393,10 +399,9 @@ Block read_block(const ObjectReader& b) {
   block.fixed = b.boolean("fixed", false);
   block.fixed_rotation = b.boolean("fixed_rotation", false);
   block.gravity = b.boolean("gravity", true);
-  block.support_kx = b.number("support_kx", 0);
-  block.support_ky = b.number("support_ky", 0);
-  block.support_kr = b.number("support_kr", 0);
-  block.beam_kr = b.number("beam_kr", 0);
+  for_each_effect_field([&](const Effect&, const SceneField& f) {
+    if (f.block) block.*f.block = b.number(f.key(), block.*f.block);
+  });
   const json& vertices = b.required("vertices");
   if (!vertices.is_array()) throw SceneError(b.key_path("vertices"), "expected an array of [x, y]");
   if (auto m = limits::check(limits::Limit::vertices_per_block, static_cast<double>(vertices.size())))
@@ -462,19 +467,32 @@ void read_gauges(const json& gauges, const std::string& where, Scene& scene) {
   }
 }
 
-// A gap is given as its opening and taper, or as its intrados and extrados ends.
+// "a and b", "a, b and c": the keys of fields.
+std::string and_list(const std::vector<const SceneField*>& fields) {
+  std::string s;
+  for (std::size_t i = 0; i < fields.size(); ++i)
+    s += (i == 0 ? "" : i + 1 == fields.size() ? " and " : ", ") + fields[i]->key();
+  return s;
+}
+
+// A gap is given by its stored values (the opening and taper) or by the derived ones (its ends),
+// each set in turn keeping the others.
 void read_joint_gap(const ObjectReader& c, JointGap& gap) {
   gap.joint = c.string("joint");
-  if (c.has("opening") || c.has("taper")) {
-    if (c.has("intrados") || c.has("extrados"))
-      throw SceneError(c.path(), "give the opening and taper or the intrados and extrados ends, not both");
-    gap.opening = c.number("opening", 0);
-    gap.taper = c.number("taper", 0);
+  const std::vector<const SceneField*> stored = gap_fields(false), derived = gap_fields(true);
+  const auto given = [&](const std::vector<const SceneField*>& fields) {
+    return std::any_of(fields.begin(), fields.end(), [&](const SceneField* f) { return c.has(f->key()); });
+  };
+  if (given(stored)) {
+    if (given(derived))
+      throw SceneError(c.path(), "give the " + and_list(stored) + " or the " + and_list(derived) + " ends, not both");
+    for (const SceneField* f : stored) gap.*f->gap = c.number(f->key(), gap.*f->gap);
   } else {
-    const double intrados = c.number("intrados", 0), extrados = c.number("extrados", 0);
-    require_non_negative(intrados, c.key_path("intrados"));
-    require_non_negative(extrados, c.key_path("extrados"));
-    gap.set_ends(intrados, extrados);
+    std::vector<double> values;
+    for (const SceneField* f : derived) values.push_back(c.number(f->key(), 0));
+    for (std::size_t i = 0; i < derived.size(); ++i)
+      check_limits(*derived[i], values[i], c.key_path(derived[i]->key()));
+    for (std::size_t i = 0; i < derived.size(); ++i) derived[i]->set_gap(gap, values[i]);
   }
 }
 
@@ -511,18 +529,9 @@ json scene_to_json(const Scene& scene) {
   for (const auto& [group, m] : scene.joint_groups) {
     json g = {{"kn", m.normal_stiffness}, {"ks", m.shear_stiffness}, {"friction_deg", m.friction_angle / kDegree}};
     // Effect keys appear only when set, so a scene without effects keeps its text and its hash.
-    if (m.closure_max != 0) g["closure_max"] = m.closure_max;
-    if (m.slip_softening != 0 || m.friction_residual != 0 || m.friction_loss != 0) {
-      if (m.friction_loss != 0)
-        g["friction_loss_deg"] = m.friction_loss / kDegree;
-      else
-        g["friction_residual_deg"] = m.friction_residual / kDegree;
-      g["slip_softening"] = m.slip_softening;
-    }
-    if (m.cohesion != 0) g["cohesion"] = m.cohesion;
-    if (m.tensile_strength != 0) g["tensile_strength"] = m.tensile_strength;
-    if (m.compressive_strength != 0) g["compressive_strength"] = m.compressive_strength;
-    if (m.crushing_softening != 0) g["crushing_softening"] = m.crushing_softening;
+    for_each_effect_field([&](const Effect&, const SceneField& f) {
+      if (f.material && (f.written ? f.written(m) : m.*f.material != 0)) g[f.key()] = given_value(f, m.*f.material);
+    });
     j["joint_groups"][group] = g;
   }
   j["default_joint_group"] = scene.default_joint_group;
@@ -538,10 +547,9 @@ json scene_to_json(const Scene& scene) {
     if (b.fixed) block["fixed"] = true;
     if (b.fixed_rotation) block["fixed_rotation"] = true;
     if (!b.gravity) block["gravity"] = false;
-    if (b.support_kx != 0) block["support_kx"] = b.support_kx;
-    if (b.support_ky != 0) block["support_ky"] = b.support_ky;
-    if (b.support_kr != 0) block["support_kr"] = b.support_kr;
-    if (b.beam_kr != 0) block["beam_kr"] = b.beam_kr;
+    for_each_effect_field([&](const Effect&, const SceneField& f) {
+      if (f.block && b.*f.block != 0) block[f.key()] = b.*f.block;
+    });
     j["blocks"].push_back(block);
   }
   j["contact"] = {{"points_per_joint", scene.contact.points_per_joint},
@@ -572,9 +580,10 @@ json scene_to_json(const Scene& scene) {
   for (const Gauge& g : scene.gauges)
     j["gauges"].push_back({{"name", g.name}, {"block", g.block}, {"point", vec2_json(g.point)},
                            {"direction", vec2_json(g.direction)}});
-  if (scene.joint_gap.on())
-    j["joint_gap"] = {{"joint", scene.joint_gap.joint}, {"opening", scene.joint_gap.opening},
-                      {"taper", scene.joint_gap.taper}};
+  if (scene.joint_gap.on()) {
+    j["joint_gap"] = {{"joint", scene.joint_gap.joint}};
+    for (const SceneField* f : gap_fields(false)) j["joint_gap"][f->key()] = scene.joint_gap.*f->gap;
+  }
   return j;
 }
 
@@ -619,41 +628,41 @@ std::pair<std::string, std::string> split_parameter(const std::string& name) {
   return {name.substr(0, dot), name.substr(dot + 1)};
 }
 
+// The plain law's joint-group parameters; the effects' follow them.
+const std::vector<std::string>& base_joint_fields() {
+  static const std::vector<std::string> fields = {"kn", "ks", "friction_deg"};
+  return fields;
+}
 const std::vector<std::string>& joint_fields() {
-  static const std::vector<std::string> fields = {
-      "kn",       "ks",   "friction_deg",     "closure_max",          "friction_residual_deg", "friction_loss_deg",
-      "slip_softening", "cohesion", "tensile_strength", "compressive_strength", "crushing_softening"};
+  static const std::vector<std::string> fields = [] {
+    std::vector<std::string> all = base_joint_fields();
+    for_each_effect_field([&](const Effect&, const SceneField& f) {
+      if (f.material) all.push_back(f.name);
+    });
+    return all;
+  }();
   return fields;
-}
-const std::vector<std::string>& support_fields() {
-  static const std::vector<std::string> fields = {"support_kx", "support_ky", "support_kr"};
-  return fields;
-}
-bool is_angle(const std::string& field) {
-  return field == "friction_deg" || field == "friction_residual_deg" || field == "friction_loss_deg";
 }
 bool contains(const std::vector<std::string>& list, const std::string& x) {
   return std::find(list.begin(), list.end(), x) != list.end();
 }
-
-double& material_field(JointMaterial& m, const std::string& field) {
+double& base_field(JointMaterial& m, const std::string& field) {
   if (field == "kn") return m.normal_stiffness;
   if (field == "ks") return m.shear_stiffness;
-  if (field == "friction_deg") return m.friction_angle;
-  if (field == "closure_max") return m.closure_max;
-  if (field == "friction_residual_deg") return m.friction_residual;
-  if (field == "friction_loss_deg") return m.friction_loss;
-  if (field == "slip_softening") return m.slip_softening;
-  if (field == "cohesion") return m.cohesion;
-  if (field == "tensile_strength") return m.tensile_strength;
-  if (field == "compressive_strength") return m.compressive_strength;
-  return m.crushing_softening;
+  return m.friction_angle;
 }
-double& block_field(Block& b, const std::string& field) {
-  if (field == "support_kx") return b.support_kx;
-  if (field == "support_ky") return b.support_ky;
-  if (field == "support_kr") return b.support_kr;
-  return b.beam_kr;
+
+// An effect's field of that name, with its effect; null where no effect declares it.
+struct EffectField {
+  const Effect* effect = nullptr;
+  const SceneField* field = nullptr;
+};
+EffectField find_effect_field(const std::string& name) {
+  EffectField found;
+  for_each_effect_field([&](const Effect& e, const SceneField& f) {
+    if (!found.field && f.name == name) found = {&e, &f};
+  });
+  return found;
 }
 
 // Where a parameter name points: joint groups, blocks or the joint gap.
@@ -661,14 +670,66 @@ struct ParameterTarget {
   enum class Kind { groups, blocks, gap } kind = Kind::groups;
   std::vector<std::string> names;  // groups or blocks
   std::string field;
+  EffectField effect;  // none for the plain law's parameters
 };
+
+// The blocks a bare name of an effect on blocks sets: every fixed block (support_blocks), the
+// loaded block (beam_block); reading, the first fixed block with the effect on, else the first.
+// Empty where the scene has none.
+std::vector<std::string> default_blocks(const Scene& scene, const Effect& effect, bool for_reading) {
+  if (effect.target != EffectTarget::support_blocks) {
+    if (scene.loading.type == "none" || scene.block_index(scene.loading.block) < 0) return {};
+    return {scene.loading.block};
+  }
+  std::vector<std::string> names;
+  for (const Block& b : scene.blocks)
+    if (b.fixed) names.push_back(b.name);
+  if (!for_reading || names.empty()) return names;
+  for (const Block& b : scene.blocks)
+    if (b.fixed && effect_on_block(effect, b)) return {b.name};
+  return {names.front()};
+}
+
+std::vector<std::string> block_field_names(const Effect& effect) {
+  std::vector<std::string> names;
+  for (const SceneField& f : effect.scene_fields)
+    if (f.block) names.push_back(f.name);
+  return names;
+}
+
+// Every parameter name, for the message refusing an unknown one.
+std::string expected_parameters() {
+  std::string joint;
+  for (const auto& field : joint_fields()) joint += (joint.empty() ? "" : ", ") + field;
+  std::vector<std::string> items = {joint + " [as <joint group>.<name> for one group]"};
+  for (const Effect& effect : effect_registry()) {
+    const std::vector<std::string> names = block_field_names(effect);
+    if (names.empty()) continue;
+    if (effect.target == EffectTarget::support_blocks) {
+      std::string alternatives;
+      for (const auto& name : names) alternatives += (alternatives.empty() ? "" : "|") + name;
+      items.push_back("<block>." + alternatives);
+    } else {
+      items.insert(items.end(), names.begin(), names.end());
+    }
+  }
+  for_each_effect_field([&](const Effect&, const SceneField& f) {
+    if (on_gap(f)) items.push_back(f.name);
+  });
+  std::string list;
+  for (std::size_t i = 0; i < items.size(); ++i)
+    list += (i == 0 ? "" : i + 1 == items.size() ? " or " : ", ") + items[i];
+  return list;
+}
 
 ParameterTarget resolve(const Scene& scene, const std::string& name, bool for_reading) {
   const auto [prefix, field] = split_parameter(name);
   const std::string where = "parameter '" + name + "'";
   ParameterTarget t;
   t.field = field;
-  if (contains(joint_fields(), field)) {
+  t.effect = find_effect_field(field);
+  const SceneField* effect_field = t.effect.field;
+  if (contains(base_joint_fields(), field) || (effect_field && effect_field->material)) {
     if (prefix.empty()) {
       if (scene.joint_groups.empty()) throw SceneError(where, "the scene has no joint groups");
       if (for_reading)
@@ -681,45 +742,29 @@ ParameterTarget resolve(const Scene& scene, const std::string& name, bool for_re
     }
     return t;
   }
-  if (contains(support_fields(), field) || field == "beam_kr") {
+  if (effect_field && effect_field->block) {
     t.kind = ParameterTarget::Kind::blocks;
-    const bool support = field != "beam_kr";
+    const Effect& effect = *t.effect.effect;
+    const bool fixed = effect.target == EffectTarget::support_blocks;  // else a free block
     if (!prefix.empty()) {
       const int i = scene.block_index(prefix);
       if (i < 0) throw SceneError(where, "unknown block '" + prefix + "'");
-      if (support && !scene.blocks[i].fixed) throw SceneError(where, "support springs need a fixed block; '" + prefix + "' is free");
-      if (!support && scene.blocks[i].fixed) throw SceneError(where, "beam_kr needs a free block; '" + prefix + "' is fixed");
+      if (scene.blocks[i].fixed != fixed)
+        throw SceneError(where, effect.block_texts.needs + "; '" + prefix + "' is " + (fixed ? "free" : "fixed"));
       t.names = {prefix};
-    } else if (support) {  // every fixed block; reading gives the first compliant one, else the first
-      for (const Block& b : scene.blocks)
-        if (b.fixed) t.names.push_back(b.name);
-      if (t.names.empty()) throw SceneError(where, "the scene has no fixed block");
-      if (for_reading) {
-        std::string first = t.names.front();
-        for (const Block& b : scene.blocks)
-          if (b.compliant_support()) {
-            first = b.name;
-            break;
-          }
-        t.names = {first};
-      }
     } else {
-      if (scene.loading.type == "none" || scene.block_index(scene.loading.block) < 0)
-        throw SceneError(where, "the scene has no loaded block; name one as <block>.beam_kr");
-      t.names = {scene.loading.block};
+      t.names = default_blocks(scene, effect, for_reading);
+      if (t.names.empty()) throw SceneError(where, effect.block_texts.no_default);
     }
     return t;
   }
-  if (field == "gap_intrados" || field == "gap_extrados" || field == "gap_opening" || field == "gap_taper") {
+  if (effect_field) {
     if (!prefix.empty()) throw SceneError(where, "the gap openings take no prefix (the joint is joint_gap.joint)");
     if (!scene.joint_gap.on()) throw SceneError(where, "the scene names no gap joint (set joint_gap.joint first)");
     t.kind = ParameterTarget::Kind::gap;
     return t;
   }
-  throw SceneError(where, "unknown parameter (expected kn, ks, friction_deg, closure_max, friction_residual_deg, "
-                          "friction_loss_deg, slip_softening, cohesion, tensile_strength, compressive_strength, crushing_softening "
-                          "[as <joint group>.<name> for one group], <block>.support_kx|support_ky|support_kr, "
-                          "beam_kr, gap_intrados, gap_extrados, gap_opening or gap_taper)");
+  throw SceneError(where, "unknown parameter (expected " + expected_parameters() + ")");
 }
 
 }  // namespace
@@ -729,54 +774,49 @@ std::string parameter_field(const std::string& name) { return split_parameter(na
 void set_parameter(Scene& scene, const std::string& name, double value) {
   const ParameterTarget t = resolve(scene, name, false);  // rejects unknown names before anything changes
   if (!std::isfinite(value)) throw SceneError("parameter '" + name + "'", "value is not finite");
+  const SceneField* f = t.effect.field;
   switch (t.kind) {
     case ParameterTarget::Kind::groups: {
-      const double stored = is_angle(t.field) ? value * kDegree : value;
+      const double held = f ? held_value(*f, value) : t.field == "friction_deg" ? value * kDegree : value;
       for (const auto& g : t.names) {
         JointMaterial& m = scene.joint_groups.at(g);
-        material_field(m, t.field) = stored;
-        if (t.field == "friction_loss_deg") m.friction_residual = 0;  // the two forms of the residual
-        if (t.field == "friction_residual_deg") m.friction_loss = 0;  // exclude each other
+        if (!f) {
+          base_field(m, t.field) = held;
+          continue;
+        }
+        m.*f->material = held;
+        if (f->clears) m.*f->clears = 0;  // the other form of the same value
       }
       return;
     }
     case ParameterTarget::Kind::blocks:
-      for (const auto& b : t.names) block_field(scene.blocks[scene.block_index(b)], t.field) = value;
+      for (const auto& b : t.names) scene.blocks[scene.block_index(b)].*f->block = value;
       return;
-    case ParameterTarget::Kind::gap: {
-      JointGap& gap = scene.joint_gap;
-      if (t.field == "gap_opening") {
-        gap.opening = value;
-      } else if (t.field == "gap_taper") {
-        gap.taper = value;
+    case ParameterTarget::Kind::gap:
+      if (f->derived()) {
+        check_limits(*f, value, "parameter '" + name + "'");
+        f->set_gap(scene.joint_gap, value);
       } else {
-        require_non_negative(value, "parameter '" + name + "'");
-        if (t.field == "gap_intrados") gap.set_ends(value, gap.extrados());
-        else gap.set_ends(gap.intrados(), value);
+        scene.joint_gap.*f->gap = value;
       }
       return;
-    }
   }
 }
 
 double get_parameter(const Scene& scene, const std::string& name) {
   const ParameterTarget t = resolve(scene, name, true);
+  const SceneField* f = t.effect.field;
   switch (t.kind) {
     case ParameterTarget::Kind::groups: {
       JointMaterial m = scene.joint_groups.at(t.names.front());
-      const double v = material_field(m, t.field);
-      return is_angle(t.field) ? v / kDegree : v;
+      if (f) return given_value(*f, m.*f->material);
+      const double v = base_field(m, t.field);
+      return t.field == "friction_deg" ? v / kDegree : v;
     }
-    case ParameterTarget::Kind::blocks: {
-      Block b = scene.blocks[scene.block_index(t.names.front())];
-      return block_field(b, t.field);
-    }
-    case ParameterTarget::Kind::gap: {
-      const JointGap& gap = scene.joint_gap;
-      if (t.field == "gap_opening") return gap.opening;
-      if (t.field == "gap_taper") return gap.taper;
-      return t.field == "gap_intrados" ? gap.intrados() : gap.extrados();
-    }
+    case ParameterTarget::Kind::blocks:
+      return scene.blocks[scene.block_index(t.names.front())].*f->block;
+    case ParameterTarget::Kind::gap:
+      return f->derived() ? f->get_gap(scene.joint_gap) : scene.joint_gap.*f->gap;
   }
   return 0;
 }
@@ -785,19 +825,25 @@ std::vector<std::string> parameter_names(const Scene& scene) {
   std::vector<std::string> names = joint_fields();
   for (const auto& [group, m] : scene.joint_groups)
     for (const auto& field : joint_fields()) names.push_back(group + "." + field);
-  bool any_fixed = false;
-  for (const Block& b : scene.blocks)
-    if (b.fixed) {
-      any_fixed = true;
-      for (const auto& field : support_fields()) names.push_back(b.name + "." + field);
+  for (const Effect& effect : effect_registry()) {
+    const std::vector<std::string> fields = block_field_names(effect);
+    if (fields.empty()) continue;
+    if (effect.target == EffectTarget::support_blocks) {  // per fixed block, then bare for every one
+      for (const Block& b : scene.blocks)
+        if (b.fixed)
+          for (const auto& field : fields) names.push_back(b.name + "." + field);
+      if (!default_blocks(scene, effect, false).empty()) names.insert(names.end(), fields.begin(), fields.end());
+    } else {  // bare for the loaded block, then per free block with the effect on
+      if (!default_blocks(scene, effect, false).empty()) names.insert(names.end(), fields.begin(), fields.end());
+      for (const Block& b : scene.blocks)
+        if (!b.fixed && effect_on_block(effect, b))
+          for (const auto& field : fields) names.push_back(b.name + "." + field);
     }
-  if (any_fixed) names.insert(names.end(), support_fields().begin(), support_fields().end());
-  if (scene.loading.type != "none" && scene.block_index(scene.loading.block) >= 0) names.push_back("beam_kr");
-  for (const Block& b : scene.blocks)
-    if (!b.fixed && b.beam_kr > 0) names.push_back(b.name + ".beam_kr");
-  if (scene.joint_gap.on()) {
-    for (const char* field : {"gap_intrados", "gap_extrados", "gap_opening", "gap_taper"}) names.push_back(field);
   }
+  if (scene.joint_gap.on())
+    for_each_effect_field([&](const Effect&, const SceneField& f) {
+      if (on_gap(f)) names.push_back(f.name);
+    });
   return names;
 }
 

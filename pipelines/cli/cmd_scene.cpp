@@ -1,6 +1,7 @@
 // `demcal scene arch|semicircle|wall [flags] -o scene.json`: write a generated scene.
 #include "command_registry.hpp"
 
+#include "demcal/dem/effects.hpp"
 #include "demcal/dem/generators.hpp"
 
 #include <iostream>
@@ -9,39 +10,27 @@ namespace {
 
 using namespace demcal::dem;
 
-// Flags of the engine's effects (docs/engine.md, docs/scene-format.md); 0 / empty = off.
-void add_effect_flags(CLI::App* app, EffectOptions& e, bool wall) {
-  const std::string g = "Effects (0 = off)";
-  app->add_option("--closure-max", e.closure_max, "joint-closure: maximum joint closure, every joint group (m)")
-      ->group(g)->capture_default_str();
-  app->add_option("--friction-residual-deg", e.friction_residual_deg,
-                  "friction-softening: residual friction angle (degrees)")->group(g)->capture_default_str();
-  app->add_option("--slip-softening", e.slip_softening, "friction-softening: slip to the residual friction (m)")
-      ->group(g)->capture_default_str();
-  app->add_option("--cohesion", e.cohesion, "cohesion: bond cohesion (Pa)")->group(g)->capture_default_str();
-  app->add_option("--tensile-strength", e.tensile_strength, "cohesion: bond tensile strength (Pa)")
-      ->group(g)->capture_default_str();
-  app->add_option("--compressive-strength", e.compressive_strength, "crushing-cap: compressive strength (Pa)")
-      ->group(g)->capture_default_str();
-  app->add_option("--crushing-softening", e.crushing_softening,
-                  "crushing-cap: plastic closure to zero strength (m; 0 = no softening)")->group(g)->capture_default_str();
-  app->add_option("--support-kx", e.support_kx, "support-compliance: horizontal support spring (N/m)")
-      ->group(g)->capture_default_str();
-  app->add_option("--support-ky", e.support_ky, "support-compliance: vertical support spring (N/m)")
-      ->group(g)->capture_default_str();
-  app->add_option("--support-kr", e.support_kr, "support-compliance: rotational support spring (N m/rad)")
-      ->group(g)->capture_default_str();
-  app->add_option("--support-blocks", e.support_blocks,
-                  std::string("support-compliance: comma-separated supports (default: every fixed block, ") +
-                      (wall ? "base" : "abutment_left,abutment_right") + ")")->group(g);
-  app->add_option("--gap-joint", e.gap_joint, "joint-gap: the joint, as blockA/blockB")->group(g);
-  app->add_option("--gap-intrados", e.gap_intrados, "joint-gap: opening at the lower (intrados) end (m)")
-      ->group(g)->capture_default_str();
-  app->add_option("--gap-extrados", e.gap_extrados, "joint-gap: opening at the upper (extrados) end (m)")
-      ->group(g)->capture_default_str();
-  app->add_option("--beam-kr", e.beam_kr,
-                  std::string("boundary-restraint: rotational spring of the loaded block (N m/rad)") +
-                      (wall ? "; frees the beam's rotation against it" : ""))->group(g)->capture_default_str();
+// What the help of an effect's flag says about a generator's scene (EffectFlag::help).
+struct GeneratorFacts {
+  std::string fixed_blocks;    // comma-separated
+  bool rotation_held = false;  // the loaded block is held in rotation (the wall's beam)
+};
+
+// Flags of the engine's effects, as each effect declares them (Effect::flags; docs/engine.md,
+// docs/scene-format.md); 0 / empty = off.
+void add_effect_flags(CLI::App* app, EffectOptions& options, const GeneratorFacts& facts) {
+  const std::string group = "Effects (0 = off)", fixed_blocks = "{fixed blocks}";
+  for (const Effect& effect : effect_registry())
+    for (const EffectFlag& f : effect.flags) {
+      std::string help = f.help;
+      if (const auto at = help.find(fixed_blocks); at != std::string::npos)
+        help.replace(at, fixed_blocks.size(), facts.fixed_blocks);
+      if (facts.rotation_held) help += f.help_if_rotation_held;
+      if (f.names_target)
+        app->add_option(f.flag, options.targets[f.option], help)->group(group);
+      else
+        app->add_option(f.flag, options.values[f.option], help)->group(group)->capture_default_str();
+    }
 }
 
 void setup_scene(CLI::App& app) {
@@ -68,7 +57,7 @@ void setup_scene(CLI::App& app) {
                 "Actuator travel between recorded rows (m); 0 = max-displacement / 1200")->capture_default_str();
   a->add_option("--load", arch.load, "point | none (self-weight only)")->capture_default_str();
   a->add_option("--max-time", arch.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
-  add_effect_flags(a, arch.effects, false);
+  add_effect_flags(a, arch.effects, {"abutment_left,abutment_right", false});
   a->add_option("-o,--output", arch_out, "Scene file to write")->required();
   a->callback([] {
     save_scene(make_arch(arch), arch_out);
@@ -116,7 +105,7 @@ void setup_scene(CLI::App& app) {
   w->add_option("--load-height", wall.load_height, "Height of the actuator above the wall top (m)")->capture_default_str();
   w->add_option("--actuator-stiffness", wall.actuator_stiffness, "Actuator spring stiffness (N/m)")->capture_default_str();
   w->add_option("--max-time", wall.max_time, "Simulated time limit (s); 0 = automatic")->capture_default_str();
-  add_effect_flags(w, wall.effects, true);
+  add_effect_flags(w, wall.effects, {"base", true});
   w->add_option("-o,--output", wall_out, "Scene file to write")->required();
   w->callback([] {
     save_scene(make_wall(wall), wall_out);

@@ -4,28 +4,22 @@
 
 #include "demcal/dem/scene.hpp"
 
+#include <map>
+#include <string>
+
 namespace demcal::dem {
 
-// The effects of docs/engine.md as generator options (`demcal scene arch|wall` flags). Every value
-// 0 / empty leaves the effect off. Joint-group options apply to every joint group of the scene.
+// The effects of docs/engine.md as generator options (`demcal scene arch|wall` flags), by the names
+// the effects declare (Effect::flags, effects.hpp): `values` by option ("closure_max", "support_kx",
+// "gap_intrados"), `targets` by target option ("support_blocks": comma-separated fixed blocks, none
+// = every fixed block; "gap_joint": "blockA/blockB"). An absent or 0 value leaves its effect off;
+// joint-group options apply to every joint group of the scene.
 struct EffectOptions {
-  double closure_max = 0;            // m (joint-closure)
-  double friction_residual_deg = 0;  // degrees (friction-softening, with slip_softening > 0)
-  double slip_softening = 0;         // m
-  double cohesion = 0;               // Pa (cohesion)
-  double tensile_strength = 0;       // Pa
-  double compressive_strength = 0;   // Pa (crushing-cap)
-  double crushing_softening = 0;     // m
-  double support_kx = 0;             // N/m (support-compliance) on `support_blocks`
-  double support_ky = 0;             // N/m
-  double support_kr = 0;             // N m/rad
-  std::string support_blocks;        // comma-separated fixed blocks; empty = every fixed block
-  std::string gap_joint;             // "blockA/blockB" (joint-gap)
-  double gap_intrados = 0;           // m
-  double gap_extrados = 0;           // m
-  double beam_kr = 0;                // N m/rad on the loaded block (boundary-restraint)
+  std::map<std::string, double> values;
+  std::map<std::string, std::string> targets;
 };
-// Writes the options into the scene and validates it (SceneError naming the option's key).
+// Writes the options into the scene and validates it (SceneError naming the option's key, or the
+// flags where an effect's values lack their target). Throws for option names no effect declares.
 void apply_effects(Scene& scene, const EffectOptions& effects);
 
 // Segmental arch of equal voussoirs with radial joints between two fixed abutment blocks.
