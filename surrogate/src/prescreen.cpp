@@ -10,7 +10,6 @@
 
 namespace demcal::surrogate {
 
-using detail::vector_from;
 using detail::vector_json;
 
 nlohmann::json ScreenReport::to_json() const {

@@ -12,7 +12,6 @@
 namespace demcal::surrogate {
 
 using detail::vector_from;
-using detail::vector_json;
 
 namespace {
 
