@@ -111,6 +111,12 @@ void setup(CLI::App& app) {
   sub->add_option("--max-effects", o.max_effects,
                   "Effects added at most: after one is accepted the model with it is diagnosed again, until none passes (0 = no limit)")
       ->capture_default_str();
+  sub->add_option("--resamples", o.resamples,
+                  "Resamples of the data and of the fits' round-off on which the selection is taken again (0 = none)")
+      ->capture_default_str();
+  sub->add_option("--verdict-share", o.verdict_share,
+                  "A choice reached in fewer than this share of the resamples is not the verdict: undecided")
+      ->capture_default_str();
   sub->add_flag("--quiet", flags->quiet, "No progress lines");
   sub->callback([flags, candidates, at_split] {
     // an explicit --candidates caps a split base too, unless --candidates-at-split says otherwise

@@ -8,8 +8,8 @@ namespace demcal::pipelines::detail {
 void measure_base_residual(DiagnosisRun& run) {
   const DiagnoseOptions& options = run.options;
   Diagnosis& d = run.d;
-  const std::vector<Evaluation> base_runs =
-      runs_with_reruns(run.config, run.config, run.base_params, nullptr, options.scatter_runs, run.runner);
+  run.base_runs = runs_with_reruns(run.config, run.config, run.base_params, nullptr, options.scatter_runs, run.runner);
+  const std::vector<Evaluation>& base_runs = run.base_runs;
   if (!base_runs.front().ok) throw CampaignError("the base best set cannot be simulated: " + base_runs.front().message);
   for (const auto& r : base_runs) d.base_rerun_errors.push_back(r.error);
   run.scatter = simulation_scatter(base_runs, d.scatter);

@@ -2,13 +2,16 @@
 // every case, its residuals on the base grid, re-runs that measure the simulation's own scatter.
 #include "diagnose_internal.hpp"
 
+#include "demcal/pipelines/backend.hpp"
 #include "demcal/smoothing/objective.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <thread>
 
 namespace demcal::pipelines::detail {
 
@@ -62,18 +65,59 @@ bool is_held_out(const std::string& case_name, const std::vector<std::string>& h
 }
 
 CaseRunner::CaseRunner(const CampaignConfig& config, const std::vector<std::string>& held_out_cases)
-    : held_out_cases_(held_out_cases) {
+    : held_out_cases_(held_out_cases),
+      workers_(config.backend.threads > 0 ? config.backend.threads : hardware_threads()) {
   for (const auto& c : config.cases) measured_.emplace(c.name, load_measured(c.measured));
 }
 
 Evaluation CaseRunner::evaluate(const CampaignConfig& config, const std::map<std::string, double>& params,
-                    const std::vector<ChannelResidual>* grid) {
-  Evaluation e;
+                                const std::vector<ChannelResidual>* grid) {
+  return std::move(evaluate_all({{&config, params, grid}}).front());
+}
+
+std::vector<Evaluation> CaseRunner::evaluate_all(const std::vector<RunRequest>& requests) {
+  auto simulated = simulate_all(requests);
+  std::vector<Evaluation> out;
+  for (std::size_t i = 0; i < requests.size(); ++i)
+    out.push_back(score(*requests[i].config, std::move(simulated[i]), requests[i].grid));
+  return out;
+}
+
+std::vector<std::vector<CasePrediction>> CaseRunner::simulate_all(const std::vector<RunRequest>& requests) {
+  std::vector<std::vector<CasePrediction>> simulated(requests.size());
+  std::vector<std::exception_ptr> errors(requests.size());
   const auto start = std::chrono::steady_clock::now();
-  e.cases = predict_cases(config, params);
+  const int workers = std::max(1, std::min(workers_, static_cast<int>(requests.size())));
+  PredictionOptions one_set;
+  one_set.threads = requests.size() == 1 ? workers_ : 1;  // a lone set: its cases side by side
+  std::atomic<std::size_t> next{0};
+  const auto work = [&] {
+    for (std::size_t i; (i = next++) < requests.size();) try {
+        simulated[i] = predict_cases(*requests[i].config, requests[i].params, one_set);
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+  };
+  if (workers == 1) {
+    work();
+  } else {
+    std::vector<std::thread> pool;
+    for (int w = 0; w < workers; ++w) pool.emplace_back(work);
+    for (auto& t : pool) t.join();
+  }
   simulation_s_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  simulations_ += static_cast<long>(e.cases.size());
-  simulated_this_session_ += static_cast<long>(e.cases.size());
+  for (std::size_t i = 0; i < requests.size(); ++i) {
+    if (errors[i]) std::rethrow_exception(errors[i]);
+    simulations_ += static_cast<long>(simulated[i].size());
+    simulated_this_session_ += static_cast<long>(simulated[i].size());
+  }
+  return simulated;
+}
+
+Evaluation CaseRunner::score(const CampaignConfig& config, std::vector<CasePrediction> cases,
+                             const std::vector<ChannelResidual>* grid) const {
+  Evaluation e;
+  e.cases = std::move(cases);
   std::size_t g = 0;
   for (std::size_t k = 0; k < e.cases.size(); ++k) {
     const auto& p = e.cases[k];
@@ -153,17 +197,17 @@ std::vector<double> stacked(const std::vector<ChannelResidual>& base, const std:
   return v;
 }
 
-// A parameter set's run and its re-runs with every free parameter of `nudge_space` moved by k x 1e-7
-// of itself (k = 1..reruns), each on `grid` (none: the first run's own grid), in that order; failed
-// re-runs are left out, and a failed first run is returned alone.
 std::vector<Evaluation> runs_with_reruns(const CampaignConfig& config, const CampaignConfig& nudge_space,
                                          const std::map<std::string, double>& params,
                                          const std::vector<ChannelResidual>* grid, int reruns, CaseRunner& runner) {
-  std::vector<Evaluation> runs = {runner.evaluate(config, params, grid)};
+  std::vector<RunRequest> requests{{&config, params, grid}};
+  for (int k = 1; k <= reruns; ++k) requests.push_back({&config, nudged(params, nudge_space, k), grid});
+  auto simulated = runner.simulate_all(requests);
+  std::vector<Evaluation> runs = {runner.score(config, std::move(simulated.front()), grid)};
   if (!runs.front().ok) return runs;
-  const std::vector<ChannelResidual> on = grid ? *grid : runs.front().residuals;
+  const std::vector<ChannelResidual> on = grid ? *grid : runs.front().residuals;  // the re-runs on one grid
   for (int k = 1; k <= reruns; ++k) {
-    Evaluation again = runner.evaluate(config, nudged(params, nudge_space, k), &on);
+    Evaluation again = runner.score(config, std::move(simulated[static_cast<std::size_t>(k)]), &on);
     if (again.ok) runs.push_back(std::move(again));
   }
   return runs;

@@ -47,6 +47,9 @@ void DiagnoseOptions::Validate() const {
   budget("--continued-simulations", continued_simulations, -1, " (-1: a candidate's budget)");
   budget("--scatter-runs", scatter_runs, 0);
   at_least("--max-effects", max_effects, 0, " (0: no limit)");
+  at_least("--resamples", resamples, 0);
+  if (resamples > kMaxResamples) fail("--resamples", std::to_string(resamples), "must be <= " + std::to_string(kMaxResamples));
+  share("--verdict-share", verdict_share);
   if (!(scatter_floor_ratio > 0)) fail("--scatter-floor-ratio", text(scatter_floor_ratio), "must be > 0");
   at_least("noise_level_ratio", noise_level_ratio, 1);
   at_least("held_out_tolerance", held_out_tolerance, 0);
@@ -144,6 +147,7 @@ void detail::diagnose_from_base(DiagnosisRun& run) {
     calibrate_candidates(run);
   }
   select_and_search_further(run);
+  resample_verdict(run);
   if (!run.at_noise) bound_accepted_parameters(run);
   add_verdict_notes(run);
 }
@@ -233,7 +237,7 @@ json Diagnosis::to_json() const {
   for (const auto& a : added)
     added_json.push_back({{"effect", a.effect}, {"target", a.target}, {"parameters", a.parameters},
                           {"error_before", finite_or_null(a.error_before)}, {"error_after", finite_or_null(a.error_after)},
-                          {"folder", a.folder}});
+                          {"frequency", finite_or_null(a.frequency)}, {"folder", a.folder}});
   json points = json::object();
   for (const auto& [key, n] : effective_points)
     points[key] = {{"points", n}, {"from", effective_points_from.at(key)}};
@@ -251,6 +255,7 @@ json Diagnosis::to_json() const {
           {"conclusion", conclusion},
           {"notes", notes},
           {"verdict", verdict},
+          {"frequency", frequency.to_json()},
           {"advised_candidate_simulations", advised_candidate_simulations > 0 ? json(advised_candidate_simulations) : json()},
           {"error_before", finite_or_null(error_before)},
           {"error_after", finite_or_null(error_after)},

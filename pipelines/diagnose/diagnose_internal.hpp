@@ -4,6 +4,7 @@
 //   signatures.cpp     3. each effect probed: how much of the residual it can explain
 //   extension.cpp      4. the extended calibrations, best signature first
 //   selection.cpp      5. the verdict, with further searches where no fit explains the curves
+//   resampling.cpp     5c. how often the verdict holds over resamples of the data and round-off
 //   ranges.cpp         6. how tightly the data pin an accepted effect's parameters
 //   notes.cpp          7. the verdict's notes; diagnose_report.cpp: report.md
 // The stages share a DiagnosisRun; case_runner.cpp simulates parameter sets for them, residual.cpp
@@ -26,6 +27,9 @@ namespace demcal::pipelines::detail {
 // loading envelope (its measured gap already set).
 void note_simulated_sampling(ChannelResidual& residual, const smoothing::XYSeries& simulated,
                              const smoothing::XYSeries& simulated_envelope);
+
+// A share in [0, 1] as a percentage of three significant digits: "97 %", "33.5 %".
+std::string percent(double share);
 
 // `s` usable as a file or folder name: every character but letters, digits, '-' and '_' -> '_'.
 std::string file_safe(std::string s);
@@ -53,15 +57,30 @@ struct Evaluation {
   double held_out_error = Diagnosis::kNaN;
 };
 
+// One parameter set to simulate: on `config` (the base or an extended model), its residuals on
+// `grid` (the base residuals: fits compare point by point) or, when null, on its own grid.
+struct RunRequest {
+  const CampaignConfig* config = nullptr;
+  std::map<std::string, double> params;
+  const std::vector<ChannelResidual>* grid = nullptr;
+};
+
 // Simulates parameter sets on the campaign's cases and counts the runs.
 class CaseRunner {
  public:
   CaseRunner(const CampaignConfig& config, const std::vector<std::string>& held_out_cases);
 
-  // Simulates `params` on `config` (the base or an extended model). With `grid` (the base
-  // residuals) the residuals are taken on the same displacements, so fits compare point by point.
+  // Simulates `params` on `config` (RunRequest).
   Evaluation evaluate(const CampaignConfig& config, const std::map<std::string, double>& params,
                       const std::vector<ChannelResidual>* grid = nullptr);
+  // Every request at once, one set per worker (the campaign's threads backend: backend.threads, or
+  // every hardware thread), a lone set's cases side by side; the evaluations in the order asked,
+  // the same as evaluating the sets one by one. Throws the first (in that order) that throws.
+  std::vector<Evaluation> evaluate_all(const std::vector<RunRequest>& requests);
+  // The two halves of evaluate_all: the simulations, and the residuals of one set's simulated cases.
+  std::vector<std::vector<CasePrediction>> simulate_all(const std::vector<RunRequest>& requests);
+  Evaluation score(const CampaignConfig& config, std::vector<CasePrediction> cases,
+                   const std::vector<ChannelResidual>* grid) const;
 
   // Every run the diagnosis has evaluated, its calibrations' archived ones included, so that the
   // budget and the count of a resumed diagnosis are those of an uninterrupted one.
@@ -77,6 +96,7 @@ class CaseRunner {
  private:
   std::map<std::string, smoothing::Curve> measured_;  // by case name
   std::vector<std::string> held_out_cases_;
+  int workers_ = 1;
   long simulations_ = 0;
   long simulated_this_session_ = 0;  // direct runs and the calibrations' runs not read from the archive
   double simulation_s_ = 0, model_s_ = 0;
@@ -87,8 +107,8 @@ class CaseRunner {
 std::vector<double> stacked(const std::vector<ChannelResidual>& base, const std::vector<ChannelResidual>* other);
 
 // A parameter set's run and its re-runs with every free parameter of `nudge_space` moved by k x 1e-7
-// of itself (k = 1..reruns), each on `grid` (none: the first run's own grid), in that order; failed
-// re-runs are left out, and a failed first run is returned alone.
+// of itself (k = 1..reruns), each on `grid` (none: the first run's own grid), in that order, all
+// simulated at once; failed re-runs are left out, and a failed first run is returned alone.
 std::vector<Evaluation> runs_with_reruns(const CampaignConfig& config, const CampaignConfig& nudge_space,
                                          const std::map<std::string, double>& params,
                                          const std::vector<ChannelResidual>* grid, int reruns, CaseRunner& runner);
@@ -187,7 +207,8 @@ struct DiagnosisRun {
 
   // 2. the base residual
   std::map<std::string, double> base_params;  // the base best set, every parameter
-  Evaluation base;                            // its run of median error among it and its re-runs
+  std::vector<Evaluation> base_runs;          // its run and re-runs (runs_with_reruns)
+  Evaluation base;                            // its run of median error among them
   double noise = 0;                           // N, over every fitted channel
   double scatter = 0;                         // N, the simulation's own (NaN: no re-runs)
   bool at_noise = false;                      // the base fit is within the noise: nothing to explain
@@ -210,6 +231,7 @@ void measure_base_residual(DiagnosisRun& run);         // 2. base_residual.cpp
 void probe_signatures(DiagnosisRun& run);              // 3. signatures.cpp
 void calibrate_candidates(DiagnosisRun& run);          // 4. extension.cpp
 void select_and_search_further(DiagnosisRun& run);     // 5. selection.cpp
+void resample_verdict(DiagnosisRun& run);              // 5c. resampling.cpp
 void bound_accepted_parameters(DiagnosisRun& run);     // 6. ranges.cpp
 void add_verdict_notes(DiagnosisRun& run);             // 7. notes.cpp
 void add_further_effects(DiagnosisRun& run);           // 8. further_effects.cpp

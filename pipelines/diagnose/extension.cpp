@@ -182,7 +182,14 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
     return false;
   }
   c.rerun_errors.clear();
-  for (const auto& one : runs) c.rerun_errors.push_back(one.error);
+  c.run_residuals.clear();
+  c.run_held_out_rms.clear();
+  for (const auto& one : runs) {
+    c.rerun_errors.push_back(one.error);
+    c.run_residuals.push_back(one.residuals);
+    c.run_held_out_rms.emplace_back();
+    for (const auto& ch : one.held_out) c.run_held_out_rms.back()[key_of(ch)] = ch.rms;
+  }
   const Evaluation& e = median_run(runs);
   c.residuals = e.residuals;
   c.error = e.error;

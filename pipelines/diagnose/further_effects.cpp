@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <memory>
 
@@ -17,7 +18,8 @@ namespace {
 
 Diagnosis::AddedEffect added_effect(const DiagnosisRun& run, const std::string& folder) {
   const EffectCandidate& c = *chosen_candidate(run.d);
-  return {c.effect, c.target, fitted_effect_parameters(c, run.d), run.d.error_before, c.error, folder};
+  return {c.effect, c.target, fitted_effect_parameters(c, run.d), run.d.error_before, c.error, folder,
+          run.d.frequency.verdict};
 }
 
 // The next step: the model of `run`'s chosen effect as the base, its fit as the base fit, the
@@ -87,13 +89,15 @@ void add_further_effects(DiagnosisRun& run) {
     steps.push_back(std::move(next));
   }
   if (d.added.size() > 1) {
-    std::string effects, errors = format_number(d.error_before, 3);
+    std::string effects, errors = format_number(d.error_before, 3), shares;
     for (const auto& a : d.added) {
       effects += (effects.empty() ? "" : "; ") + a.effect + (a.target.empty() ? "" : " at " + a.target) + ": " + a.parameters;
       errors += " → " + format_number(a.error_after, 3);
+      if (std::isfinite(a.frequency)) shares += (shares.empty() ? "" : ", ") + percent(a.frequency);
     }
     d.headline = "Missing " + std::to_string(d.added.size()) + " effects: " + effects + "; force error " + errors +
-                 " N against " + format_number(run.noise, 3) + " N of noise.";
+                 " N against " + format_number(run.noise, 3) + " N of noise" +
+                 (shares.empty() ? "" : "; each step's choice reached by " + shares + " of its resamples") + ".";
   }
 }
 

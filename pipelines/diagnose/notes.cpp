@@ -196,8 +196,24 @@ std::string detail::fitted_effect_parameters(const EffectCandidate& c, const Dia
   return listed;
 }
 
+// How often the resamples reach the verdict's choice, for the headline: "; chosen in 97 % of 200
+// resamples of the data and round-off", or for an undecided verdict every choice's share; "" when
+// not measured.
+std::string frequency_text(const Diagnosis& d) {
+  const auto& f = d.frequency;
+  if (f.resamples == 0) return "";
+  const std::string of = " of " + std::to_string(f.resamples) + " resamples of the data and round-off";
+  if (d.outcome != DiagnosisOutcome::undecided) return "; the choice of " + percent(f.verdict) + of;
+  std::string listed;
+  for (const auto& [name, share] : f.effects)
+    if (share > 0) listed += (listed.empty() ? "" : ", ") + name + " " + percent(share);
+  if (f.none > 0) listed += (listed.empty() ? "" : ", ") + std::string("no effect ") + percent(f.none);
+  if (f.undecided > 0) listed += (listed.empty() ? "" : ", ") + std::string("a tie ") + percent(f.undecided);
+  return "; chosen" + of + ": " + listed;
+}
+
 std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
-  const std::string against = " N against " + format_number(noise, 3) + " N of noise";
+  const std::string against = " N against " + format_number(noise, 3) + " N of noise" + frequency_text(d);
   switch (d.outcome) {
     case DiagnosisOutcome::missing_effect:
       if (const EffectCandidate* c = chosen_candidate(d))
@@ -209,8 +225,8 @@ std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
       std::string names;
       for (const auto& c : d.candidates)
         if (c.verdict == CandidateVerdict::tied) names += (names.empty() ? "" : " or ") + c.effect;
-      return "Undecided: " + names + " explain the residual equally well; force error " +
-             format_number(d.error_before, 3) + against + ".";
+      return "Undecided: " + names + ", the data do not settle it; force error " + format_number(d.error_before, 3) +
+             against + ".";
     }
     case DiagnosisOutcome::unexplained: {
       const auto tried = std::count_if(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return c.tried; });

@@ -69,19 +69,25 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
   const auto within_budget = [&](long runs) {
     return options.max_simulations <= 0 || runner.simulations() + runs_per_trial * runs <= options.max_simulations;
   };
-  const ChangeAt change_at = [&](const std::map<std::string, double>& params) {
-    const Evaluation e = runner.evaluate(fitted, params, &grid);
+  const auto change_of = [&](const Evaluation& e) {
     return e.ok ? information_criterion_change(c.residuals, e.residuals, 0, effective_points) : Diagnosis::kNaN;
+  };
+  const ChangeAt change_at = [&](const std::map<std::string, double>& params) {
+    return change_of(runner.evaluate(fitted, params, &grid));
   };
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
     const std::string& name = m.parameter_names[i];
     if (!best.count(name)) continue;
     const auto values = bound_trial_values(m.parameters[i], best.at(name), parameter_cap(name, m.parameters[i], best));
     if (!within_budget(static_cast<long>(values.size()))) return;  // over the budget: the rest stay unchecked
+    std::vector<RunRequest> trials;  // each value with the others at the best, run at once
+    for (double v : values) {
+      trials.push_back({&fitted, best, &grid});
+      trials.back().params[name] = v;
+    }
+    const std::vector<Evaluation> trial_runs = runner.evaluate_all(trials);
     const auto conditional = [&](double v) {
-      std::map<std::string, double> params = best;
-      params[name] = v;
-      return change_at(params);
+      return change_of(trial_runs[static_cast<std::size_t>(std::find(values.begin(), values.end(), v) - values.begin())]);
     };
     const auto refitted = [&](double v) {
       if (options.profile_simulations == 0 || !within_budget(options.profile_simulations)) return Diagnosis::kNaN;

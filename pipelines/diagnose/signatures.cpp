@@ -121,11 +121,11 @@ dem::ResponseScales response_scales(const Evaluation& base, const DiagnoseOption
   return s;
 }
 
-// Sensitivity of the stacked curves to each free base parameter: one forward difference of 5 % of
-// the unit cube (backwards at the upper bound).
-std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config, const std::map<std::string, double>& best,
-                                                    const std::vector<ChannelResidual>& base, CaseRunner& runner) {
-  std::vector<std::vector<double>> columns;
+// The runs that measure the sensitivity of the stacked curves to each free base parameter: one
+// forward difference of 5 % of the unit cube (backwards at the upper bound).
+std::vector<RunRequest> sensitivity_runs(const CampaignConfig& config, const std::map<std::string, double>& best,
+                                         const std::vector<ChannelResidual>& base) {
+  std::vector<RunRequest> runs;
   const auto& space = config.space;
   const auto names = space.free_names();
   Eigen::VectorXd physical(static_cast<Eigen::Index>(names.size()));
@@ -137,10 +137,9 @@ std::vector<std::vector<double>> base_sensitivities(const CampaignConfig& config
     u(jj) += u(jj) + 0.05 <= 1 ? 0.05 : -0.05;
     std::map<std::string, double> params = best;
     params[names[j]] = space.to_physical(u)(jj);
-    const Evaluation e = runner.evaluate(config, complete_parameters(config, params), &base);
-    if (e.ok) columns.push_back(stacked(base, &e.residuals));
+    runs.push_back({&config, complete_parameters(config, params), &base});
   }
-  return columns;
+  return runs;
 }
 
 // Candidate targets of an effect in this scene: each fixed block for support springs; joints for
@@ -176,22 +175,39 @@ struct SignatureBasis {
 // One target of an effect, probed: its candidate (signature and search ranges), model and best probe.
 struct TargetProbe {
   ProbedTarget probed;
+  const dem::Effect* effect = nullptr;
   bool applicable = true;  // the effect could be switched on there
   bool signed_ = false;    // at least one probe ran, so the signature means something
+  CampaignConfig fitted;   // the model on the fitted cases, what the probes run
+  std::vector<std::vector<double>> points;      // the probes' fractions of the search ranges
+  std::vector<std::vector<double>> signatures;  // the probes' curve changes (stacked)
+  double warm_error = std::numeric_limits<double>::infinity();
+
+  // The effect's parameters at fractions `t` of their ranges, over the base set.
+  std::map<std::string, double> values_at(const std::vector<double>& t, const DiagnosisRun& run) const {
+    return effect_values(probed.model, run.base_params, t);
+  }
+  // A probe's run: the search's start when it comes closer to the measurement than every earlier one.
+  void note_run(const Evaluation& s, const std::map<std::string, double>& values) {
+    if (s.ok && s.error < warm_error) {
+      warm_error = s.error;
+      probed.warm = values;
+    }
+  }
 };
 
-TargetProbe probe_target(DiagnosisRun& run, const dem::Effect& effect, const std::vector<std::string>& targets,
-                         const SignatureBasis& basis) {
-  const DiagnoseOptions& options = run.options;
-  const std::vector<ChannelResidual>& base_residuals = run.base.residuals;
+// The effect switched on at `targets`: its candidate and model, or why it cannot be.
+TargetProbe extend_at(DiagnosisRun& run, const dem::Effect& effect, const std::vector<std::string>& targets,
+                      const SignatureBasis& basis) {
   TargetProbe out;
+  out.effect = &effect;
   EffectCandidate& c = out.probed.candidate;
   c.effect = effect.name;
   c.target = targets.empty() ? "" : targets.front();
   ExtendedModel& m = out.probed.model;
   try {
     m = extend(run.config, effect, targets, basis.scales,
-               fs::path(options.out) / "candidates" / (effect.name + (c.target.empty() ? "" : "@" + c.target)));
+               fs::path(run.options.out) / "candidates" / (effect.name + (c.target.empty() ? "" : "@" + c.target)));
   } catch (const std::exception& ex) {
     c.reason = std::string("not applicable here: ") + ex.what();
     c.signature_score = -1;
@@ -202,55 +218,52 @@ TargetProbe probe_target(DiagnosisRun& run, const dem::Effect& effect, const std
     c.search_ranges[m.parameter_names[i]] = {
         m.parameters[i].search_min,
         std::min(m.parameters[i].search_max, parameter_cap(m.parameter_names[i], m.parameters[i], run.base_params))};
-  std::vector<std::vector<double>> signatures;
-  std::map<std::string, double>& warm = out.probed.warm;  // the probe closest to the measurement starts the search
-  double warm_error = std::numeric_limits<double>::infinity();
-  const CampaignConfig probed = fitted_cases(m.config, options);
-  const auto probe_at = [&](const std::vector<double>& t) {
-    const auto values = effect_values(m, run.base_params, t);
-    const Evaluation s = run.runner.evaluate(probed, values, &base_residuals);
-    if (s.ok && s.error < warm_error) {
-      warm_error = s.error;
-      warm = values;
-    }
-    return s;
-  };
-  const auto points = probe_points(m.parameter_names.size());
-  for (const auto& t : points) {
-    const Evaluation s = probe_at(t);
-    if (s.ok) signatures.push_back(stacked(base_residuals, &s.residuals));
-  }
-  // one more run where the probes, taken as linear, say the residual is explained: the
-  // search's start when it fits better than every probe
-  if (signatures.size() == points.size()) {
-    const auto t = linearised_fractions(basis.residual, basis.sensitivities, signatures, m.parameter_names.size(),
-                                        kProbeFractions[0], kProbeFractions[2]);
-    if (!t.empty()) probe_at(t);
-  }
-  // starts only, not signatures: a form the range holds at its end is no small change
-  const auto probe_error = [&](const std::vector<double>& t) {
-    const Evaluation s = probe_at(t);
-    return s.ok ? s.error : std::numeric_limits<double>::quiet_NaN();
-  };
-  search_simplest_form(m.parameters, probe_error, kSimplestFormRefinements);
-  if (!signatures.empty()) c.signature_score = signature_score(basis.residual, basis.sensitivities, signatures);
-  if (signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
-  if (!c.target.empty())
-    progress(options, "  " + effect.name + " at " + c.target + ": signature " + format_number(100 * c.signature_score, 2) +
-                          " %, best probe " + format_number(warm_error, 3) + " N");
-  out.signed_ = !signatures.empty();
+  out.fitted = fitted_cases(m.config, run.options);
+  out.points = probe_points(m.parameter_names.size());
   return out;
 }
 
-// The effect probed at every target; its best target joins the candidates, other targets whose
-// signatures come close are kept for calibration too (run.close_targets).
-void probe_effect(DiagnosisRun& run, const dem::Effect& effect, const SignatureBasis& basis) {
+// The target's probes after their runs: its signature, one more run where the probes, taken as
+// linear, say the residual is explained (the search's start when it fits better than every probe;
+// made by the caller, with every target's at once), then the search of the effect's simplest form
+// (starts only, not signatures: a form the range holds at its end is no small change).
+std::vector<double> linearised_probe(TargetProbe& t, const std::vector<Evaluation>& probe_runs,
+                                     const SignatureBasis& basis, DiagnosisRun& run) {
+  for (std::size_t k = 0; k < t.points.size(); ++k) {
+    t.note_run(probe_runs[k], t.values_at(t.points[k], run));
+    if (probe_runs[k].ok) t.signatures.push_back(stacked(run.base.residuals, &probe_runs[k].residuals));
+  }
+  if (t.signatures.size() != t.points.size()) return {};
+  return linearised_fractions(basis.residual, basis.sensitivities, t.signatures, t.probed.model.parameter_names.size(),
+                              kProbeFractions[0], kProbeFractions[2]);
+}
+
+void finish_probe(TargetProbe& t, const SignatureBasis& basis, DiagnosisRun& run) {
+  const auto probe_error = [&](const std::vector<double>& fractions) {
+    const auto values = t.values_at(fractions, run);
+    const Evaluation s = run.runner.evaluate(t.fitted, values, &run.base.residuals);
+    t.note_run(s, values);
+    return s.ok ? s.error : std::numeric_limits<double>::quiet_NaN();
+  };
+  search_simplest_form(t.probed.model.parameters, probe_error, kSimplestFormRefinements);
+  EffectCandidate& c = t.probed.candidate;
+  if (!t.signatures.empty()) c.signature_score = signature_score(basis.residual, basis.sensitivities, t.signatures);
+  if (t.signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
+  if (!c.target.empty())
+    progress(run.options, "  " + c.effect + " at " + c.target + ": signature " + format_number(100 * c.signature_score, 2) +
+                              " %, best probe " + format_number(t.warm_error, 3) + " N");
+  t.signed_ = !t.signatures.empty();
+}
+
+// The effect probed at every target (`probes`, in targets_for's order); its best target joins the
+// candidates, other targets whose signatures come close are kept for calibration too
+// (run.close_targets).
+void choose_target(DiagnosisRun& run, const dem::Effect& effect, std::vector<TargetProbe>& probes) {
   EffectCandidate best_target;
   best_target.effect = effect.name;
   best_target.signature_score = -1;
   std::vector<ProbedTarget> probed_targets;
-  for (const auto& targets : targets_for(effect, run.base, basis.first_scene)) {
-    TargetProbe t = probe_target(run, effect, targets, basis);
+  for (auto& t : probes) {
     if (!t.applicable) {
       if (best_target.signature_score < 0 && best_target.reason.empty()) best_target = t.probed.candidate;
       continue;
@@ -283,12 +296,48 @@ void probe_signatures(DiagnosisRun& run) {
   const CampaignConfig fitted = fitted_cases(run.config, run.options);
   SignatureBasis basis;
   basis.residual = stacked(run.base.residuals, nullptr);
-  basis.sensitivities = base_sensitivities(fitted, run.base_params, run.base.residuals, run.runner);
   basis.first_scene = build_scene(run.config.cases.front().scene, run.config.source + ": cases[0].scene");
   basis.scales = response_scales(run.base, run.options);
   if (basis.scales.peak_normal_stress > 0) run.d.peak_normal_stress = basis.scales.peak_normal_stress;
   if (basis.scales.start_normal_stress > 0) run.d.start_normal_stress = basis.scales.start_normal_stress;
-  for (const auto* e : run.effects) probe_effect(run, *e, basis);
+  // Every effect at every target; the runs of all of them at once, in three rounds: the base
+  // sensitivities and every probe, then every linearised probe, then the simplest forms' searches.
+  std::vector<std::vector<TargetProbe>> probes;  // per effect of run.effects
+  for (const auto* e : run.effects) {
+    probes.emplace_back();
+    for (const auto& targets : targets_for(*e, run.base, basis.first_scene))
+      probes.back().push_back(extend_at(run, *e, targets, basis));
+  }
+  std::vector<RunRequest> first = sensitivity_runs(fitted, run.base_params, run.base.residuals);
+  const std::size_t sensitivities = first.size();
+  for (auto& effect : probes)
+    for (auto& t : effect)
+      if (t.applicable)
+        for (const auto& point : t.points) first.push_back({&t.fitted, t.values_at(point, run), &run.base.residuals});
+  const std::vector<Evaluation> first_runs = run.runner.evaluate_all(first);
+  for (std::size_t k = 0; k < sensitivities; ++k)
+    if (first_runs[k].ok) basis.sensitivities.push_back(stacked(run.base.residuals, &first_runs[k].residuals));
+  std::vector<RunRequest> linearised;
+  std::vector<TargetProbe*> linearised_of;
+  std::size_t next = sensitivities;
+  for (auto& effect : probes)
+    for (auto& t : effect) {
+      if (!t.applicable) continue;
+      const std::vector<Evaluation> own(first_runs.begin() + static_cast<long>(next),
+                                        first_runs.begin() + static_cast<long>(next + t.points.size()));
+      next += t.points.size();
+      const auto fractions = linearised_probe(t, own, basis, run);
+      if (fractions.empty()) continue;
+      linearised.push_back({&t.fitted, t.values_at(fractions, run), &run.base.residuals});
+      linearised_of.push_back(&t);
+    }
+  const std::vector<Evaluation> linearised_runs = run.runner.evaluate_all(linearised);
+  for (std::size_t k = 0; k < linearised.size(); ++k) linearised_of[k]->note_run(linearised_runs[k], linearised[k].params);
+  for (std::size_t e = 0; e < probes.size(); ++e) {
+    for (auto& t : probes[e])
+      if (t.applicable) finish_probe(t, basis, run);
+    choose_target(run, *run.effects[e], probes[e]);
+  }
   std::stable_sort(run.d.candidates.begin(), run.d.candidates.end(),
                    [](const auto& a, const auto& b) { return a.signature_score > b.signature_score; });
 }

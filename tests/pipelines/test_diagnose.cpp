@@ -548,6 +548,107 @@ TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
   EXPECT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
 }
 
+namespace {
+
+// A fitted channel of 200 grid points whose measurement is a curve plus noise `noise` (seeded), and
+// whose simulated curve misses that curve by `misfit(x)`.
+ChannelResidual channel_missing_by(double noise, double (*misfit)(double), std::uint64_t seed) {
+  const auto measured = sampled(200, noise, seed);
+  ChannelResidual c;
+  c.case_name = "main";
+  c.channel = "load_vertical";
+  c.noise = noise;
+  c.displacement = measured.x;
+  c.measured = measured.y;
+  for (double x : measured.x) c.simulated.push_back(curve_at(x) + misfit(x));
+  double sum = 0;
+  for (std::size_t i = 0; i < c.measured.size(); ++i) sum += std::pow(c.measured[i] - c.simulated[i], 2);
+  c.rms = std::sqrt(sum / static_cast<double>(c.measured.size()));
+  return c;
+}
+
+double no_misfit(double) { return 0; }
+double broad_misfit(double x) { return 300 * std::sin(x / 12e-3 * M_PI); }
+
+// The base fit misses the curve broadly; the candidate fits it to the noise in the runs `good` of
+// three (the others miss like the base); the candidate's residual for the median is its first run.
+struct ResampledCase {
+  Diagnosis d;
+  FitRuns base;
+  std::vector<double> effective_points{20};
+};
+ResampledCase resampled_case(std::vector<bool> good) {
+  ResampledCase r;
+  for (std::uint64_t k = 0; k < 3; ++k) {
+    r.base.residuals.push_back({channel_missing_by(50, broad_misfit, 7)});
+    r.base.held_out_rms.emplace_back();
+  }
+  r.d.base_residuals = r.base.residuals.front();
+  r.d.error_before = r.d.base_residuals.front().rms;
+  EffectCandidate c = tried_candidate("support-compliance", 0, 0);
+  c.effect_parameters = 1;
+  for (bool g : good) {
+    c.run_residuals.push_back({channel_missing_by(50, g ? no_misfit : broad_misfit, 7)});
+    c.run_held_out_rms.emplace_back();
+  }
+  c.residuals = c.run_residuals.front();
+  c.error = c.residuals.front().rms;
+  c.score = information_criterion_change(r.d.base_residuals, c.residuals, 1, r.effective_points);
+  r.d.candidates = {c};
+  select_effect(r.d, DiagnoseOptions{});
+  return r;
+}
+
+}  // namespace
+
+TEST(Evidence, AVerdictEveryResampleReachesHoldsWithItsFrequency) {
+  ResampledCase r = resampled_case({true, true, true});
+  ASSERT_EQ(r.d.outcome, DiagnosisOutcome::missing_effect) << r.d.verdict;
+  const DiagnoseOptions options;
+  r.d.frequency = verdict_frequency(r.d, r.base, r.effective_points, options, 1);
+  EXPECT_EQ(r.d.frequency.resamples, 200);
+  EXPECT_EQ(r.d.frequency.verdict, 1.0);  // a fit to the noise against a misfit of 4 x it: every resample
+  EXPECT_EQ(r.d.frequency.effects.at("support-compliance"), 1.0);
+  EXPECT_EQ(r.d.frequency.none, 0.0);
+  EXPECT_FALSE(settle_on_frequency(r.d, options));
+  EXPECT_EQ(r.d.outcome, DiagnosisOutcome::missing_effect);
+  EXPECT_NE(verdict_headline(r.d, 50, 5).find("; the choice of 100 % of 200 resamples of the data and round-off."),
+            std::string::npos)
+      << verdict_headline(r.d, 50, 5);
+  const auto again = verdict_frequency(r.d, r.base, r.effective_points, options, 1);  // deterministic
+  EXPECT_EQ(again.to_json(), r.d.frequency.to_json());
+  DiagnoseOptions none = options;
+  none.resamples = 0;
+  EXPECT_EQ(verdict_frequency(r.d, r.base, r.effective_points, none, 1).resamples, 0);
+}
+
+TEST(Evidence, AVerdictThatOnlyALuckyRunReachesIsUndecided) {
+  // The candidate's median run fits, two of its three runs do not: the round-off decides.
+  ResampledCase r = resampled_case({true, false, false});
+  ASSERT_EQ(r.d.outcome, DiagnosisOutcome::missing_effect) << r.d.verdict;
+  const DiagnoseOptions options;
+  r.d.frequency = verdict_frequency(r.d, r.base, r.effective_points, options, 1);
+  EXPECT_GT(r.d.frequency.verdict, 0.2);  // about a third of the resamples draw the run that fits
+  EXPECT_LT(r.d.frequency.verdict, 0.5);
+  EXPECT_NEAR(r.d.frequency.verdict + r.d.frequency.none + r.d.frequency.undecided, 1.0, 1e-12);
+  EXPECT_TRUE(settle_on_frequency(r.d, options));
+  EXPECT_EQ(r.d.outcome, DiagnosisOutcome::undecided);
+  EXPECT_TRUE(r.d.chosen.empty());
+  EXPECT_EQ(r.d.error_after, r.d.error_before);
+  EXPECT_EQ(r.d.candidates.front().verdict, CandidateVerdict::tied);
+  EXPECT_NE(r.d.verdict.find("reaches it in only"), std::string::npos) << r.d.verdict;
+  EXPECT_NE(r.d.verdict.find("no effect in"), std::string::npos) << r.d.verdict;
+  EXPECT_NE(verdict_headline(r.d, 50, 5).find("Undecided: support-compliance, the data do not settle it"), std::string::npos)
+      << verdict_headline(r.d, 50, 5);
+  // A lower share asked of a verdict keeps it.
+  ResampledCase kept = resampled_case({true, false, false});
+  DiagnoseOptions lenient = options;
+  lenient.verdict_share = 0.2;
+  kept.d.frequency = verdict_frequency(kept.d, kept.base, kept.effective_points, lenient, 1);
+  EXPECT_FALSE(settle_on_frequency(kept.d, lenient));
+  EXPECT_EQ(kept.d.outcome, DiagnosisOutcome::missing_effect);
+}
+
 // Which searches go on after the selection (step 5b), on the joint-closure measurements of
 // docs/journal/diagnose-studies.md ("Contenders searched further"): seed 5 ("no effect found", joint closure's
 // criterion -24.5 with its error risen 189 -> 222 N) and seed 1 (three effects tied at 170-211 N,

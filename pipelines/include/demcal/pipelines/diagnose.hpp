@@ -42,6 +42,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <limits>
 #include <map>
@@ -215,6 +216,8 @@ ParameterBound profile_bound(const std::string& name, double best, const std::ve
 
 // Options of run_diagnosis, each named as its flag of `demcal diagnose` (docs/commands/diagnose.md
 // has the table; docs/diagnose.md says why each default is what it is). Counts are simulations.
+constexpr int kMaxResamples = 100000;  // DiagnoseOptions::resamples at most: each takes the selection again
+
 struct DiagnoseOptions {
   std::string out = "diagnosis";      // --out: folder of diagnosis.json, report.md, base/, candidates/
   std::vector<std::string> effects;   // --effects: names to consider; empty = every registered effect
@@ -285,6 +288,11 @@ struct DiagnoseOptions {
   // from the model with it (its fit the new base, the other effects the candidates), until no
   // further effect passes; 0 = no limit, 1 = one effect per diagnosis.
   int max_effects = 0;
+  // --resamples: the selection taken again on this many resamples of the data and of the fits'
+  // round-off (verdict_frequency); 0 = none. --verdict-share: a choice (an effect, or none) that
+  // fewer than this share of them reach is not the verdict: "undecided", with the shares. In (0, 1].
+  int resamples = 200;                // <= kMaxResamples
+  double verdict_share = 0.5;
   bool resume = false;                // --resume: continue the calibrations from their archives
   bool progress = true;               // --quiet sets false: progress lines on stderr
   bool report = true;                 // --no-report sets false: report.md with figures
@@ -352,6 +360,10 @@ struct EffectCandidate {
   std::string reason;                      // one line: why this verdict
   long simulations = 0;                    // of its calibration, archived runs included
   std::vector<ChannelResidual> residuals;  // of the best extended set
+  // Every run behind rerun_errors (same order): the fitted channels' residuals and the held-out
+  // channels' RMS errors, the round-off realisations of verdict_frequency. Not in diagnosis.json.
+  std::vector<std::vector<ChannelResidual>> run_residuals;
+  std::vector<std::map<std::string, double>> run_held_out_rms;
   std::map<std::string, double> held_out_rms;  // "<case>/<channel>" -> N, on data not fitted
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
   std::vector<ParameterBound> bounds;      // of the effect's parameters, when accepted or tied
@@ -393,6 +405,7 @@ struct Diagnosis {
     double error_before = kNaN;    // N, of the model it was added to
     double error_after = kNaN;     // N, of its fit
     std::string folder;            // "" for the first (this diagnosis's own folder)
+    double frequency = kNaN;       // its step's VerdictFrequency::verdict
   };
   std::vector<AddedEffect> added;
   DiagnosisOutcome outcome = DiagnosisOutcome::no_effect_needed;
@@ -405,6 +418,16 @@ struct Diagnosis {
   std::string conclusion;
   std::vector<std::string> notes;
   std::string verdict;
+  // How often the selection reaches the verdict's choice when it is taken again on resamples
+  // (verdict_frequency); `resamples` 0 when not measured.
+  struct VerdictFrequency {
+    long resamples = 0;
+    std::map<std::string, double> effects;  // effect -> share of the resamples choosing it
+    double none = kNaN;                     // share choosing no effect
+    double undecided = kNaN;                // share left undecided (a tie)
+    double verdict = kNaN;                  // share reaching the verdict's own choice
+    nlohmann::json to_json() const;
+  } frequency;
   long advised_candidate_simulations = 0;  // a longer search the verdict advises (0: none; see
                                            // advised_candidate_simulations())
   double error_before = kNaN;              // RMS force error over all channels, N
@@ -498,6 +521,29 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 // is named).
 constexpr double kUnexplainedRatio = 2;
 void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// The runs a verdict is resampled over: the base fit's run and re-runs, each one's fitted residuals
+// (on the base grid) and held-out RMS errors.
+struct FitRuns {
+  std::vector<std::vector<ChannelResidual>> residuals;
+  std::vector<std::map<std::string, double>> held_out_rms;
+};
+
+// How often select_effect reaches each choice when taken again on `options.resamples` resamples,
+// each of them: one run drawn for the base fit (`base_runs`) and for every tried candidate
+// (EffectCandidate::run_residuals), the round-off a search's best set happens to meet; and one
+// moving-block bootstrap of every fitted channel's grid points, shared by all fits, with blocks of
+// n / effective points (the diagnosis's, `effective_points`) consecutive points, so that each block
+// is about one independent point of the data. Criterion changes are taken with the same effective
+// points. A deterministic function of its inputs and `seed`. `resamples` 0 when nothing was tried.
+Diagnosis::VerdictFrequency verdict_frequency(const Diagnosis& diagnosis, const FitRuns& base_runs,
+                                              const std::vector<double>& effective_points,
+                                              const DiagnoseOptions& options, std::uint64_t seed);
+
+// The verdict when its choice holds in fewer than options.verdict_share of the resamples
+// (diagnosis.frequency): undecided, every choice with its share named; a tie stays as it is. True
+// when the verdict changed.
+bool settle_on_frequency(Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // Step 5b, after select_effect: the candidates whose search goes on (DiagnoseOptions::
 // continued_simulations), by name, in the diagnosis's order; called again after each round.

@@ -1,0 +1,158 @@
+#!/usr/bin/env python3
+"""`demcal diagnose` on the records of another DEM code (data/refdem-arch/, its README gives the
+declared effects and truths): one diagnosis per record, then the table of docs/diagnose.md's
+"Records of another code": verdict, how often the resamples reach it, each effect parameter with
+its range against the truth, the error before and after against the noise, simulations and wall time.
+
+usage: refdem_table.py DEMCAL_BINARY OUT_DIR [--records A-control-1,A-support-1,...] [-- FLAGS...]
+
+FLAGS after `--` go to every `demcal diagnose` (none: its defaults). Each record gets
+OUT_DIR/<record>/ (campaign.json, the diagnosis); a finished one (diagnosis.json present) is read,
+not run again, so the table resumes. Writes OUT_DIR/table.json and prints the markdown table.
+
+"Right": every declared effect named and no other; for a control, no effect named. An effect
+record whose diagnosis says "no effect needed" with the base fit within the noise is counted right
+too, and marked so (the README: an effect may not stand above the noise for a calibrated base).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+DATA = os.path.join(HERE, "..", "data", "refdem-arch")
+
+# Declared effects and the truths of their parameters (suffix of the calibrated name -> value, SI;
+# friction in degrees), from data/refdem-arch/README.md.
+TRUTH = {
+    "A-control": ([], {"kn": 2.9e9, "ks": 1.2e9, "friction_deg": 32.5}),
+    "A-control-noisy": ([], {"kn": 3.3e9, "ks": 1.5e9, "friction_deg": 30.9}),
+    "A-softening": (["friction-softening"], {"kn": 3.0e9, "ks": 1.3e9, "friction_deg": 34,
+                                             "friction_loss_deg": 8, "slip_softening": 5e-4}),
+    "A-support": (["support-compliance"], {"kn": 3.4e9, "ks": 1.3e9, "friction_deg": 31.5, "support_kx": 2e6}),
+    "A-gap": (["joint-gap"], {"kn": 3.1e9, "ks": 1.2e9, "friction_deg": 31.8, "gap_opening": 8e-4}),
+    "A-closure": (["joint-closure"], {"kn": 2.0e9, "ks": 1.1e9, "friction_deg": 31.2, "closure_max": 1.5e-4}),
+    "A-closure-support": (["joint-closure", "support-compliance"],
+                          {"kn": 2.2e9, "ks": 1.0e9, "friction_deg": 31.6, "closure_max": 1e-4, "support_kx": 1.5e6}),
+    "B-control": ([], {"kn": 2.7e9, "ks": 1.1e9, "friction_deg": 32}),
+    "B-softening": (["friction-softening"], {"kn": 2.7e9, "ks": 1.1e9, "friction_deg": 33,
+                                             "friction_loss_deg": 8, "slip_softening": 1e-3}),
+    "B-closure": (["joint-closure"], {"kn": 1.8e9, "ks": 0.9e9, "friction_deg": 31.5, "closure_max": 1e-4}),
+}
+RECORDS = sorted(f[:-4] for f in os.listdir(DATA) if f.endswith(".csv"))
+
+
+def truth_of(record):
+    return TRUTH[record.rsplit("-", 1)[0]]
+
+
+def campaign_for(record, folder):
+    geometry = record.split("-")[0]
+    with open(os.path.join(DATA, geometry + "-campaign.json")) as f:
+        campaign = json.load(f)
+    campaign["measured"]["file"] = os.path.abspath(os.path.join(DATA, record + ".csv"))
+    campaign["output"] = os.path.abspath(os.path.join(folder, "base-campaign"))
+    path = os.path.join(folder, "campaign.json")
+    with open(path, "w") as f:
+        json.dump(campaign, f, indent=2)
+    return path
+
+
+def diagnose(binary, record, out, flags):
+    folder = os.path.join(out, record)
+    os.makedirs(folder, exist_ok=True)
+    result = os.path.join(folder, "diag", "diagnosis.json")
+    if not os.path.exists(result):
+        campaign = campaign_for(record, folder)
+        start = time.time()
+        with open(os.path.join(folder, "diagnose.log"), "w") as log:
+            subprocess.run([binary, "diagnose", campaign, "--out", os.path.join(folder, "diag"), "--no-report"] + flags,
+                           stdout=log, stderr=subprocess.STDOUT, check=False)
+        print("%s: %.0f s" % (record, time.time() - start), file=sys.stderr)
+    with open(result) as f:
+        return json.load(f)
+
+
+def number(v):
+    return "%.3g" % v
+
+
+def effect_parameters(d, declared, truth):
+    """Each parameter of the chosen effects: value, range (the bounds' check), truth, inside or not."""
+    rows = []
+    for c in d["candidates"]:
+        if c["effect"] not in d["chosen"]:
+            continue
+        for name, value in sorted(c["params"].items()):
+            if name in d["base"]["params"]:
+                continue
+            key = name.split(".")[-1]
+            b = c.get("bounds", {}).get(name, {})
+            lower, upper = b.get("lower"), b.get("upper")
+            inside = None
+            if key in truth:
+                inside = (lower is None or truth[key] >= lower) and (upper is None or truth[key] <= upper)
+            rows.append({"name": name, "value": value, "lower": lower, "upper": upper, "truth": truth.get(key),
+                         "inside": inside})
+    return rows
+
+
+def judged(record, d):
+    declared, truth = truth_of(record)
+    chosen = d["chosen"]
+    noise = (sum(v * v for v in d["noise"].values()) / max(1, len(d["noise"]))) ** 0.5
+    # the diagnosis's own rule: a base fit within the noise and scatter calibrates no candidate
+    within_noise = d["outcome"] == "no_effect_needed" and not any(c["tried"] for c in d["candidates"])
+    right = sorted(chosen) == sorted(declared) or (declared and within_noise)
+    return {"record": record, "declared": declared, "outcome": d["outcome"], "chosen": chosen,
+            "headline": d["headline"], "frequency": d.get("frequency", {}).get("verdict"),
+            "parameters": effect_parameters(d, declared, truth), "error_before": d["error_before"],
+            "error_after": d["error_after"], "noise": noise, "simulations": d["simulations"],
+            "wall_s": d["timing"]["wall_s"], "right": bool(right), "within_noise": bool(declared and within_noise)}
+
+
+def markdown(rows):
+    out = ["| record | declared | verdict | resamples reaching it | effect parameters (range) vs truth | "
+           "error before → after (noise), N | simulations | wall (s) | right |",
+           "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        verdict = ", ".join(r["chosen"]) if r["chosen"] else r["outcome"].replace("_", " ")
+        params = "; ".join(
+            "%s %s (%s–%s) vs %s%s" % (p["name"].split(".")[-1], number(p["value"]),
+                                       "·" if p["lower"] is None else number(p["lower"]),
+                                       "·" if p["upper"] is None else number(p["upper"]),
+                                       "?" if p["truth"] is None else number(p["truth"]),
+                                       "" if p["inside"] is None else (" in" if p["inside"] else " OUT"))
+            for p in r["parameters"]) or "–"
+        freq = "–" if r["frequency"] is None else "%.0f %%" % (100 * r["frequency"])
+        out.append("| %s | %s | %s | %s | %s | %s → %s (%s) | %d | %.0f | %s |" % (
+            r["record"], ", ".join(r["declared"]) or "none", verdict, freq, params, number(r["error_before"]),
+            number(r["error_after"]), number(r["noise"]), r["simulations"], r["wall_s"],
+            ("yes (within the noise)" if r["within_noise"] else "yes") if r["right"] else "**no**"))
+    right = sum(r["right"] for r in rows)
+    out.append("")
+    out.append("%d of %d right." % (right, len(rows)))
+    return "\n".join(out)
+
+
+def main():
+    argv = sys.argv[1:]
+    flags = []
+    if "--" in argv:
+        flags = argv[argv.index("--") + 1:]
+        argv = argv[:argv.index("--")]
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("binary")
+    parser.add_argument("out")
+    parser.add_argument("--records", default=",".join(RECORDS))
+    args = parser.parse_args(argv)
+    rows = [judged(r, diagnose(os.path.abspath(args.binary), r, args.out, flags)) for r in args.records.split(",")]
+    with open(os.path.join(args.out, "table.json"), "w") as f:
+        json.dump({"flags": flags, "rows": rows}, f, indent=2)
+    print(markdown(rows))
+
+
+if __name__ == "__main__":
+    main()
