@@ -239,8 +239,9 @@ void add_further_effects(DiagnosisRun& run);           // 8. further_effects.cpp
 void finish_diagnosis(DiagnosisRun& run, double wall_time_s);
 // Stages 2 to 7 on the base model of `run`, whose base fit is set (stage 1, or a previous step).
 void diagnose_from_base(DiagnosisRun& run);
-// The chosen fit's own parameters, "name ≈ value (lower – upper)" in engineering units, the range
-// from its bounds check where that ran.
+// The chosen fit's own parameters, "field ≈ value (lower – upper)" in engineering units, the range
+// from its bounds check where that ran; those the check pins on neither side only named ("support_ky,
+// support_kr not pinned by the data"). A field two groups set is named in full ("<group>.<field>").
 std::string fitted_effect_parameters(const EffectCandidate& c, const Diagnosis& d);
 
 // `note` (a sentence with its leading space, "" = none) appended to the verdict and to its notes;

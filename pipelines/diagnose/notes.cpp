@@ -180,30 +180,39 @@ std::string with_unit(double v, const std::string& unit) {
 
 std::string detail::fitted_effect_parameters(const EffectCandidate& c, const Diagnosis& d) {
   const dem::Effect& effect = dem::find_effect(c.effect);
-  std::string listed;
+  std::map<std::string, int> uses;  // of each field: named by its field alone unless two groups set it
+  for (const auto& [name, value] : c.params)
+    if (!d.base_params.count(name)) ++uses[dem::parameter_field(name)];
+  std::string pinned, loose;  // the parameters the bounds' check pins on a side, and those it does not
   for (const auto& [name, value] : c.params) {
     if (d.base_params.count(name)) continue;
     const dem::EffectParameter* p = effect.parameter(dem::parameter_field(name));
     if (!p) continue;
-    listed += (listed.empty() ? "" : ", ") + name + " ≈ " + with_unit(value, p->unit);
+    const std::string field = uses[dem::parameter_field(name)] > 1 ? name : dem::parameter_field(name);
     const auto b = std::find_if(c.bounds.begin(), c.bounds.end(), [&](const ParameterBound& x) { return x.name == name; });
-    if (b == c.bounds.end()) continue;
-    if (b->bounded()) listed += " (" + with_unit(b->lower, p->unit) + " – " + with_unit(b->upper, p->unit) + ")";
-    else if (std::isfinite(b->upper)) listed += " (below " + with_unit(b->upper, p->unit) + ")";
-    else if (std::isfinite(b->lower)) listed += " (above " + with_unit(b->lower, p->unit) + ")";
-    else listed += " (not bounded by the data)";
+    if (b != c.bounds.end() && !std::isfinite(b->lower) && !std::isfinite(b->upper)) {
+      loose += (loose.empty() ? "" : ", ") + field;
+      continue;
+    }
+    std::string text = field + " ≈ " + with_unit(value, p->unit);
+    if (b != c.bounds.end()) {
+      if (b->bounded()) text += " (" + with_unit(b->lower, p->unit) + " – " + with_unit(b->upper, p->unit) + ")";
+      else if (std::isfinite(b->upper)) text += " (below " + with_unit(b->upper, p->unit) + ")";
+      else text += " (above " + with_unit(b->lower, p->unit) + ")";
+    }
+    pinned += (pinned.empty() ? "" : ", ") + text;
   }
-  return listed;
+  if (!loose.empty()) pinned += (pinned.empty() ? "" : "; ") + loose + " not pinned by the data";
+  return pinned;
 }
 
 // How often the resamples reach the verdict's choice, for the headline: "; chosen in 97 % of 200
-// resamples of the data and round-off", or for an undecided verdict every choice's share; "" when
-// not measured.
+// resamples", or for an undecided verdict every choice's share; "" when not measured.
 std::string frequency_text(const Diagnosis& d) {
   const auto& f = d.frequency;
   if (f.resamples == 0) return "";
-  const std::string of = " of " + std::to_string(f.resamples) + " resamples of the data and round-off";
-  if (d.outcome != DiagnosisOutcome::undecided) return "; the choice of " + percent(f.verdict) + of;
+  const std::string of = " of " + std::to_string(f.resamples) + " resamples";
+  if (d.outcome != DiagnosisOutcome::undecided) return "; chosen in " + percent(f.verdict) + of;
   std::string listed;
   for (const auto& [name, share] : f.effects)
     if (share > 0) listed += (listed.empty() ? "" : ", ") + name + " " + percent(share);

@@ -436,14 +436,15 @@ TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {
   d.base_params = {{"kn", 1e9}};
   EffectCandidate c = tried_candidate("support-compliance", 125, -40);
   c.target = "abutment_right";
-  c.params = {{"kn", 1.1e9}, {"abutment_right.support_kx", 1.1e6}};
-  c.bounds = {bound_from_trials("abutment_right.support_kx", 1.1e6, {{8e5, 30}, {1.6e6, 25}}, 10)};
+  c.params = {{"kn", 1.1e9}, {"abutment_right.support_kx", 1.1e6}, {"abutment_right.support_ky", 8e6}};
+  c.bounds = {bound_from_trials("abutment_right.support_kx", 1.1e6, {{8e5, 30}, {1.6e6, 25}}, 10),
+              bound_from_trials("abutment_right.support_ky", 8e6, {{1e6, 2}, {5e7, 3}}, 10)};  // ruled out nowhere
   d.candidates = {c};
   select_effect(d, DiagnoseOptions{});
   ASSERT_EQ(d.outcome, DiagnosisOutcome::missing_effect) << d.verdict;
   EXPECT_EQ(verdict_headline(d, 44, 5),
-            "Missing: support-compliance at abutment_right: abutment_right.support_kx ≈ 1.1 MN/m (800 kN/m – 1.6 MN/m); "
-            "force error 232 → 125 N against 44 N of noise.");
+            "Missing: support-compliance at abutment_right: support_kx ≈ 1.1 MN/m (800 kN/m – 1.6 MN/m); "
+            "support_ky not pinned by the data; force error 232 → 125 N against 44 N of noise.");
   d.candidates.front().score = -1;  // no longer worth its parameter
   select_effect(d, DiagnoseOptions{});
   EXPECT_EQ(d.outcome, DiagnosisOutcome::unexplained) << d.verdict;  // 232 N is far above 44 N
@@ -612,7 +613,7 @@ TEST(Evidence, AVerdictEveryResampleReachesHoldsWithItsFrequency) {
   EXPECT_EQ(r.d.frequency.none, 0.0);
   EXPECT_FALSE(settle_on_frequency(r.d, options));
   EXPECT_EQ(r.d.outcome, DiagnosisOutcome::missing_effect);
-  EXPECT_NE(verdict_headline(r.d, 50, 5).find("; the choice of 100 % of 200 resamples of the data and round-off."),
+  EXPECT_NE(verdict_headline(r.d, 50, 5).find("; chosen in 100 % of 200 resamples."),
             std::string::npos)
       << verdict_headline(r.d, 50, 5);
   const auto again = verdict_frequency(r.d, r.base, r.effective_points, options, 1);  // deterministic
