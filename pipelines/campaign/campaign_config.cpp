@@ -252,7 +252,19 @@ const FieldTable<BackendSpec>& backend_fields() {
 }
 
 const FieldTable<CampaignConfig>& identifiability_fields() {
-  static const FieldTable<CampaignConfig> table{field("relative_band", &CampaignConfig::identifiability_band)};
+  static const FieldTable<CampaignConfig> table{
+      field("relative_band", &CampaignConfig::identifiability_band),
+      custom_field<CampaignConfig>(
+          "profile",
+          [](CampaignConfig& c, const json& value, const std::string& where) {
+            try {
+              c.identifiability_profile = surrogate::ProfileOptions::from_json(value, where + ".profile");
+            } catch (const std::invalid_argument& e) {
+              throw CampaignError(e.what());
+            }
+          },
+          [](const CampaignConfig& c) -> std::optional<json> { return c.identifiability_profile.to_json(); }),
+  };
   return table;
 }
 

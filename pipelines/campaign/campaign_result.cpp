@@ -1,4 +1,4 @@
-// result.json: the campaign result and its identifiability band as JSON.
+// result.json: the campaign result as JSON (its identifiability block: identifiability.cpp).
 #include "campaign_internal.hpp"
 
 #include <algorithm>
@@ -27,29 +27,6 @@ std::vector<ParameterSet> top_distinct(const std::vector<ParameterSet>& all, siz
   return top;
 }
 
-Identifiability identifiability(const std::vector<ParameterSet>& all, const CampaignConfig& config) {
-  Identifiability id;
-  id.relative_band = config.identifiability_band > 0
-                         ? config.identifiability_band
-                         : 1.0 / std::sqrt(2.0 * static_cast<double>(config.objective_options.points));
-  const auto top = top_distinct(all, all.size());
-  if (top.empty()) return id;
-  id.band_fitness = top.front().fitness * (1 + id.relative_band);
-  for (const auto& name : config.space.free_names()) {
-    const double best = top.front().params.at(name);
-    id.parameters[name] = {best, best, best};
-  }
-  for (const auto& s : top) {
-    if (s.fitness > id.band_fitness) break;
-    ++id.sets_in_band;
-    for (auto& [name, range] : id.parameters) {
-      range.min = std::min(range.min, s.params.at(name));
-      range.max = std::max(range.max, s.params.at(name));
-    }
-  }
-  return id;
-}
-
 }  // namespace detail
 
 namespace {
@@ -61,16 +38,6 @@ json params_json(const std::map<std::string, double>& params) {
 }
 
 }  // namespace
-
-json Identifiability::to_json() const {
-  json params = json::object();
-  for (const auto& [name, r] : parameters) {
-    params[name] = {{"best", r.best}, {"min", r.min}, {"max", r.max}};
-    if (r.min > 0) params[name]["max_over_min"] = r.max / r.min;
-  }
-  return {{"relative_band", relative_band}, {"band_fitness", finite_or_null(band_fitness)},
-          {"sets_in_band", sets_in_band}, {"parameters", params}};
-}
 
 json CampaignResult::to_json() const {
   auto set_json = [](const ParameterSet& s) {
@@ -93,7 +60,9 @@ json CampaignResult::to_json() const {
           {"convergence", convergence},
           {"wall_time_s", wall_time_s},
           {"timing", {{"wall_s", wall_time_s}, {"model_s", model_time_s}, {"simulations_s", simulation_time_s},
-                      {"runs_summed_s", run_time_s}}},
+                      {"runs_summed_s", run_time_s},
+                      {"identifiability_fit_s", identifiability.profile.fit_seconds},
+                      {"identifiability_profile_s", identifiability.profile.profile_seconds}}},
           {"identifiability", identifiability.to_json()},
           {"session", {{"simulated", simulated_this_session}, {"reused_from_archive", reused_from_archive}}}};
   if (surrogate_used)

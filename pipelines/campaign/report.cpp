@@ -354,6 +354,39 @@ void write_five_best(std::ostream& md, const ReportInputs& in) {
   }
 }
 
+// The identifiability block of result.json as a table, with how the ranges were obtained.
+void write_identifiability(std::ostream& md, const ReportInputs& in) {
+  const auto& id = in.result->identifiability;
+  if (id.parameters.empty()) return;
+  md << "\n## Identifiability\n\nValues that fit within the noise band: fitness <= best x (1 + "
+     << format_number(id.relative_band, three_decimals) << ") = " << format_number(id.band_fitness, one_decimal) << " ("
+     << id.sets_in_band << " evaluated sets in it). ";
+  if (id.method == "profile") {
+    const auto& p = id.profile;
+    md << "Range: the parameter's profile on an emulator (Gaussian process on " << (p.log_transformed ? "log " : "")
+       << "fitness, " << p.training_rows << " runs, leave-one-out relative error "
+       << format_number(p.loo_relative_error, three_decimals) << "; the others re-optimised at each of "
+       << id.options.grid_points << " values) within " << format_number(p.threshold, one_decimal)
+       << " (the band over the larger of the best fitness and the emulator's minimum, "
+       << format_number(p.emulator_minimum, one_decimal) << "), joined with the range of the evaluated sets.\n\n";
+  } else {
+    md << "Range: over the evaluated sets only (" << id.method_note << ").\n\n";
+  }
+  md << "| parameter | best | range | evaluated sets | profile |\n| --- | --- | --- | --- | --- |\n";
+  auto range = [](const std::string& name, double lo, double hi) {
+    if (!std::isfinite(lo)) return std::string("-");
+    return table_value(name, lo) + " - " + table_value(name, hi);
+  };
+  for (const auto& name : id.coordinate_names.empty() ? in.config->space.free_names() : id.coordinate_names) {
+    const auto it = id.parameters.find(name);
+    if (it == id.parameters.end()) continue;
+    const auto& r = it->second;
+    md << "| " << table_header(name) << " | " << table_value(name, r.best) << " | " << range(name, r.min, r.max) << " | "
+       << range(name, r.evaluated_min, r.evaluated_max) << " | " << range(name, r.profile_min, r.profile_max) << " |\n";
+  }
+  md << "\n";
+}
+
 void write_failure_modes(std::ostream& md, const ReportInputs& in, const std::string& out_dir) {
   const auto& config = *in.config;
   md << "## Failure mode\n\n";
@@ -458,6 +491,7 @@ std::string write_report(const ReportInputs& in, const std::string& out_dir) {
   write_best_fits(md, in, out_dir);
   md << "## Convergence\n\n" << figure_markdown(convergence_figure(in, out_dir));
   write_five_best(md, in);
+  write_identifiability(md, in);
   md << "\n## Calibrated sets in parameter space\n\n";
   for (const auto& f : parameter_space_figures(in, out_dir)) md << figure_markdown(f);
   write_failure_modes(md, in, out_dir);

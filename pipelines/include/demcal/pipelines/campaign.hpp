@@ -38,6 +38,7 @@
 #include "demcal/smoothing/curve.hpp"
 #include "demcal/smoothing/objective.hpp"
 #include "demcal/smoothing/smoother.hpp"
+#include "demcal/surrogate/profile.hpp"
 #include "demcal/surrogate/surrogate.hpp"
 
 #include <nlohmann/json.hpp>
@@ -154,6 +155,10 @@ struct CampaignConfig {
   // 0 = 1/sqrt(2 x objective points) (0.05 for 200 points): the relative spread of a fitness value
   // (a root sum of squares over `points` residuals) under a fresh draw of measurement noise.
   double identifiability_band = 0;
+  // How the ranges are obtained (campaign key "identifiability": {"profile": {...}}, every field of
+  // surrogate::ProfileOptions; {"enabled": false} = the evaluated sets only): profiles of the fitness
+  // on a Gaussian-process emulator trained on the campaign's own evaluations.
+  surrogate::ProfileOptions identifiability_profile;
 
   // Throws CampaignError naming the key and value: no case, a case without measured file or
   // scene (scene not needed for the command backend), negative weights, bad objective type,
@@ -221,19 +226,53 @@ struct ParameterSet {
 
 enum class CampaignStatus { completed, failed };
 
-// How well the data pin each free parameter: the range of the parameter over the distinct
-// evaluated sets whose fitness is within the band (best x (1 + relative_band)). The sets are those
-// the optimiser happened to evaluate, so the ranges are lower bounds of the indistinguishable region.
+// Identifiability (result.json key "identifiability"; docs/pipelines.md): for every free parameter,
+// the range of values that fit within the noise band, fitness <= best x (1 + relative_band).
+//   - evaluated range: over the distinct evaluated sets within the band. A converged swarm samples
+//     a small cluster, so this is a lower bound of the indistinguishable region.
+//   - profile range (method "profile"): where the parameter's profile on an emulator of the fitness
+//     (a Gaussian process on log fitness, trained on every finite evaluation; the other parameters
+//     re-optimised on the emulator at each of a grid of values) is within the band
+//     (surrogate/profile.hpp: the band's reference is the larger of the best fitness and the
+//     emulator's minimum).
+//   - reported range (min, max): the hull of both, so never narrower than the evaluated range.
+// Method "evaluated" when there is no emulator: fewer than profile.min_rows distinct finite sets,
+// the profile switched off, or the emulator could not be fitted (method_note says which).
 struct ParameterRange {
-  double best = 0, min = 0, max = 0;   // SI (friction in degrees)
+  double best = 0, min = 0, max = 0;   // SI (friction in degrees); min, max: the reported range
+  double evaluated_min = 0, evaluated_max = 0;   // over the evaluated sets within the band
+  double profile_min = std::numeric_limits<double>::quiet_NaN();  // NaN: no profile, or no grid
+  double profile_max = std::numeric_limits<double>::quiet_NaN();  // value within the band
+  // The profile: values of the parameter (a grid uniform in the optimiser's unit coordinate, so in
+  // log10 for a log-scaled parameter), the emulator's smallest predicted fitness at each, its latent
+  // standard deviation there (log fitness units for a log emulator), and where the other free
+  // parameters were at that minimum (by name). Empty without a profile.
+  std::vector<double> profile_values, profile_fitness, profile_sd;
+  std::map<std::string, std::vector<double>> profile_others;
 };
 struct Identifiability {
   double relative_band = 0;
-  double band_fitness = std::numeric_limits<double>::quiet_NaN();
+  double band_fitness = std::numeric_limits<double>::quiet_NaN();  // best x (1 + relative_band)
   long sets_in_band = 0;               // distinct parameter sets within the band
+  std::string method = "evaluated";    // "profile" | "evaluated"
+  std::string method_note;             // why "evaluated" (empty for "profile")
+  // The emulator (method "profile"): kind "gp", what surrogate::profile_fitness reports (training
+  // rows, log transform, leave-one-out error, threshold, ...). Its wall times go to result.json's
+  // "timing" (identifiability_fit_s, identifiability_profile_s), with the other run-dependent times.
+  std::string emulator_kind;
+  surrogate::ProfileResult profile;    // its per-coordinate vectors are in unit coordinates; the
+                                       // physical ones are in `parameters`
+  surrogate::ProfileOptions options;
+  std::vector<std::string> coordinate_names;  // the free parameters in the optimiser's order
   std::map<std::string, ParameterRange> parameters;  // every free parameter
-  nlohmann::json to_json() const;      // ranges, plus max/min ratio for log-scaled parameters
+  nlohmann::json to_json() const;      // ranges, plus max/min ratio for positive values
 };
+
+// The identifiability block of a set of evaluations: a pure function of the sets (non-finite
+// fitness = a failed run, ignored), the space (its free parameters; every set must carry them),
+// the band and the profile's options (deterministic but for the wall times it reports).
+Identifiability compute_identifiability(const std::vector<ParameterSet>& all, const optimise::ParameterSpace& space,
+                                        double relative_band, const surrogate::ProfileOptions& options);
 
 struct CampaignResult {
   CampaignStatus status = CampaignStatus::completed;

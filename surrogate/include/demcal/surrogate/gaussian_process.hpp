@@ -85,6 +85,8 @@ class GaussianProcess {
   bool log_transformed() const { return log_; }
 
   GpPrediction predict(const Eigen::VectorXd& unit_point) const;
+  // The model-space mean alone: O(n d), without the O(n²) variance (for searches on the mean).
+  double predict_mean(const Eigen::VectorXd& unit_point) const;
   // Model-space value of a fitness (log y or y) and back.
   double to_model(double y) const;
   double from_model(double z) const;
