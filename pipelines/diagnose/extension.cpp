@@ -136,6 +136,8 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   // compliant-support loop test missed the soft support with rounds grown to 4 points, found it
   // with 2), and a verdict must not depend on how busy the machine was.
   c.surrogate.options.cost_ratio = HUGE_VAL;
+  // The diagnosis bounds an effect's parameters itself (stage 6): no identifiability profile here.
+  c.identifiability_profile.enabled = false;
   const bool local = options.candidate_algorithm.rfind("nlopt:", 0) == 0;
   if (local || options.candidate_algorithm == "bo") {
     // Warm start: the base best with the effect at its best-explaining probe, clipped to the box

@@ -1181,16 +1181,6 @@ json small_search_campaign(const fs::path& dir, const std::string& name) {
 
 }  // namespace
 
-TEST(DiagnoseLoop, ControlNeedsNoEffect) {
-  const fs::path dir = test_support::fresh_dir("diagnose", "control");
-  const Diagnosis d = diagnose({}, dir, {"support-compliance", "friction-softening"});
-  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
-  EXPECT_EQ(d.error_after, d.error_before);
-  EXPECT_NE(d.verdict.find("No effect needed"), std::string::npos) << d.verdict;
-  for (const auto& c : d.candidates) EXPECT_NE(c.verdict, CandidateVerdict::accepted) << c.effect;
-  EXPECT_EQ(d.advised_candidate_simulations, 0);  // a settled verdict advises no longer search
-}
-
 // The reduced goal test (docs/journal/diagnose-studies.md): horizontal springs of 5 MN/m under the right abutment,
 // which the diagnosis is not told (named in 5 of 5 noise seeds of the goal study). Both effects are
 // probed and ranked, calibrated through the campaign machinery (into the diagnosis's archive),
