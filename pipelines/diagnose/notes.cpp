@@ -207,18 +207,19 @@ std::string detail::fitted_effect_parameters(const EffectCandidate& c, const Dia
 }
 
 // How often the resamples reach the verdict's choice, for the headline: "; chosen in 97 % of 200
-// resamples", or for an undecided verdict every choice's share; "" when not measured.
+// resamples", or for an undecided verdict every choice's share ("; across 200 resamples: joint-gap
+// 23.5 %, ..."); "" when not measured.
 std::string frequency_text(const Diagnosis& d) {
   const auto& f = d.frequency;
   if (f.resamples == 0) return "";
-  const std::string of = " of " + std::to_string(f.resamples) + " resamples";
-  if (d.outcome != DiagnosisOutcome::undecided) return "; chosen in " + percent(f.verdict) + of;
+  const std::string resamples = std::to_string(f.resamples) + " resamples";
+  if (d.outcome != DiagnosisOutcome::undecided) return "; chosen in " + percent(f.verdict) + " of " + resamples;
   std::string listed;
   for (const auto& [name, share] : f.effects)
     if (share > 0) listed += (listed.empty() ? "" : ", ") + name + " " + percent(share);
   if (f.none > 0) listed += (listed.empty() ? "" : ", ") + std::string("no effect ") + percent(f.none);
   if (f.undecided > 0) listed += (listed.empty() ? "" : ", ") + std::string("a tie ") + percent(f.undecided);
-  return "; chosen" + of + ": " + listed;
+  return "; across " + resamples + ": " + listed;
 }
 
 std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
