@@ -235,8 +235,8 @@ std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
       std::string names;
       for (const auto& c : d.candidates)
         if (c.verdict == CandidateVerdict::tied) names += (names.empty() ? "" : " or ") + c.effect;
-      return "Undecided: " + names + ", the data do not settle it; force error " + format_number(d.error_before, 3) +
-             against + ".";
+      return "Undecided" + (names.empty() ? "" : ": " + names) + ", the data do not settle it; force error " +
+             format_number(d.error_before, 3) + against + ".";
     }
     case DiagnosisOutcome::unexplained: {
       const auto tried = std::count_if(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return c.tried; });

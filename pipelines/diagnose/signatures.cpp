@@ -175,7 +175,6 @@ struct SignatureBasis {
 // One target of an effect, probed: its candidate (signature and search ranges), model and best probe.
 struct TargetProbe {
   ProbedTarget probed;
-  const dem::Effect* effect = nullptr;
   bool applicable = true;  // the effect could be switched on there
   bool signed_ = false;    // at least one probe ran, so the signature means something
   CampaignConfig fitted;   // the model on the fitted cases, what the probes run
@@ -200,7 +199,6 @@ struct TargetProbe {
 TargetProbe extend_at(DiagnosisRun& run, const dem::Effect& effect, const std::vector<std::string>& targets,
                       const SignatureBasis& basis) {
   TargetProbe out;
-  out.effect = &effect;
   EffectCandidate& c = out.probed.candidate;
   c.effect = effect.name;
   c.target = targets.empty() ? "" : targets.front();
@@ -223,10 +221,9 @@ TargetProbe extend_at(DiagnosisRun& run, const dem::Effect& effect, const std::v
   return out;
 }
 
-// The target's probes after their runs: its signature, one more run where the probes, taken as
-// linear, say the residual is explained (the search's start when it fits better than every probe;
-// made by the caller, with every target's at once), then the search of the effect's simplest form
-// (starts only, not signatures: a form the range holds at its end is no small change).
+// The target's probe runs noted (its signatures, its best probe); returns where the probes, taken as
+// linear, say the residual is explained, for one more run that the caller makes with every
+// target's at once (the search's start when it fits better than every probe); none when a probe failed.
 std::vector<double> linearised_probe(TargetProbe& t, const std::vector<Evaluation>& probe_runs,
                                      const SignatureBasis& basis, DiagnosisRun& run) {
   for (std::size_t k = 0; k < t.points.size(); ++k) {
@@ -238,6 +235,8 @@ std::vector<double> linearised_probe(TargetProbe& t, const std::vector<Evaluatio
                               kProbeFractions[0], kProbeFractions[2]);
 }
 
+// After that run: the search of the effect's simplest form (starts only, not signatures: a form the
+// range holds at its end is no small change), the signature's score and its progress line.
 void finish_probe(TargetProbe& t, const SignatureBasis& basis, DiagnosisRun& run) {
   const auto probe_error = [&](const std::vector<double>& fractions) {
     const auto values = t.values_at(fractions, run);
