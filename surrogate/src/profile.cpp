@@ -178,30 +178,15 @@ ProfileOptions ProfileOptions::from_json(const nlohmann::json& j, const std::str
   return detail::options_from_json(j, where, profile_fields());
 }
 
-ProfileResult profile_fitness(const std::vector<TrainingRow>& rows, double relative_band, const ProfileOptions& options) {
-  options.Validate();
-  if (!(relative_band >= 0) || !std::isfinite(relative_band))
-    throw std::invalid_argument("profile: relative_band = " + std::to_string(relative_band) + " must be finite and >= 0");
-  const long d = rows.empty() ? 0 : static_cast<long>(rows.front().unit.size());
-  for (const auto& row : rows)
-    if (row.unit.size() != d) throw std::invalid_argument("profile: rows of different dimensions");
+namespace {
 
-  ProfileResult result;
-  result.relative_band = relative_band;
-  const std::vector<TrainingRow> distinct = distinct_finite_rows(rows);
-  result.finite_rows = static_cast<long>(distinct.size());
-  if (distinct.empty() || d == 0) {
-    result.message = "no parameter set with a finite fitness";
-    return result;
-  }
-
-  // Rows by fitness, best first (stable: ties keep their order).
-  std::vector<size_t> order(distinct.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return distinct[a].fitness < distinct[b].fitness; });
+// The band over the evaluated sets (`order`: `distinct` by fitness, best first): each coordinate's
+// best, its evaluated range, and its reported range, to be widened by the profile.
+void evaluated_ranges(ProfileResult& result, const std::vector<TrainingRow>& distinct, const std::vector<size_t>& order) {
   const TrainingRow& best = distinct[order.front()];
+  const long d = best.unit.size();
   result.best_fitness = best.fitness;
-  result.band_fitness = best.fitness * (1 + relative_band);
+  result.band_fitness = best.fitness * (1 + result.relative_band);
   result.coordinates.resize(static_cast<size_t>(d));
   for (long k = 0; k < d; ++k) {
     auto& c = result.coordinates[static_cast<size_t>(k)];
@@ -220,7 +205,120 @@ ProfileResult profile_fitness(const std::vector<TrainingRow>& rows, double relat
     c.min = c.evaluated_min;
     c.max = c.evaluated_max;
   }
+}
 
+// The emulator of the fitness on `distinct`, its figures into `result`; false (status and message
+// set) when it cannot be fitted.
+bool fit_emulator(GaussianProcess& gp, ProfileResult& result, const std::vector<TrainingRow>& distinct,
+                  const TrainingRow& best, const ProfileOptions& options) {
+  const auto fit_start = std::chrono::steady_clock::now();
+  const std::vector<TrainingRow> training = select_training_rows(distinct, options.max_training_rows);
+  Eigen::MatrixXd X(static_cast<Eigen::Index>(training.size()), best.unit.size());
+  Eigen::VectorXd y(static_cast<Eigen::Index>(training.size()));
+  for (size_t i = 0; i < training.size(); ++i) {
+    X.row(static_cast<Eigen::Index>(i)) = training[i].unit.transpose();
+    y[static_cast<Eigen::Index>(i)] = training[i].fitness;
+  }
+  GpOptions gp_options = options.gp;
+  if (gp_options.log_transform == LogTransform::always && !(y.array() > 0).all()) gp_options.log_transform = LogTransform::never;
+  gp = GaussianProcess(gp_options);
+  try {
+    gp.fit(X, y);
+  } catch (const std::exception& e) {
+    result.status = ProfileStatus::emulator_failed;
+    result.message = std::string("emulator not fitted (") + e.what() + "): ranges over the evaluated sets only";
+    result.fit_seconds = seconds_since(fit_start);
+    return false;
+  }
+  result.fit_seconds = seconds_since(fit_start);
+  if (!gp.fitted()) {
+    result.status = ProfileStatus::emulator_failed;
+    result.message = "emulator not fitted: ranges over the evaluated sets only";
+    return false;
+  }
+  result.training_rows = gp.points();
+  result.log_transformed = gp.log_transformed();
+  result.loo_relative_error = gp.leave_one_out().relative_error;
+  result.noise_sd = gp.noise_sd();
+  result.length_scales = gp.length_scales();
+  result.emulator_at_best = gp.from_model(gp.predict_mean(best.unit));
+  return true;
+}
+
+// The profile of coordinate k on the emulator, swept outwards from the grid value nearest the best
+// row: at each value the emulator minimised over the other coordinates from the neighbour's
+// minimiser, the best rows projected onto the value and seeded random points. Returns the emulator
+// evaluations it took.
+long profile_coordinate(CoordinateProfile& c, long k, const GaussianProcess& gp,
+                        const std::vector<TrainingRow>& distinct, const std::vector<size_t>& order,
+                        const ProfileOptions& options) {
+  const long d = distinct.front().unit.size();
+  const int n = options.grid_points;
+  const size_t projected = std::min(order.size(), static_cast<size_t>(options.projected_starts));
+  c.grid.resize(static_cast<size_t>(n));
+  for (int g = 0; g < n; ++g) c.grid[static_cast<size_t>(g)] = static_cast<double>(g) / (n - 1);
+  std::vector<double> model(static_cast<size_t>(n), HUGE_VAL);
+  c.argmin.assign(static_cast<size_t>(n), Eigen::VectorXd());
+  SliceObjective slice;
+  slice.gp = &gp;
+  slice.fixed = static_cast<int>(k);
+  slice.point = Eigen::VectorXd(d);
+  const int centre = static_cast<int>(std::lround(distinct[order.front()].unit[k] * (n - 1)));
+  auto profile_at = [&](int g, int neighbour) {
+    slice.value = c.grid[static_cast<size_t>(g)];
+    std::vector<Eigen::VectorXd> starts;
+    if (neighbour >= 0) starts.push_back(c.argmin[static_cast<size_t>(neighbour)]);
+    for (size_t s = 0; s < projected; ++s) starts.push_back(distinct[order[s]].unit);
+    std::mt19937_64 rng = seeded_rng(options.seed, k, g);
+    for (int s = 0; s < options.random_starts; ++s) {
+      Eigen::VectorXd u(d);
+      for (long j = 0; j < d; ++j) u[j] = uniform01(rng);
+      starts.push_back(u);
+    }
+    for (auto& start : starts) {
+      start[k] = slice.value;
+      const double value = minimise_slice(slice, start, options.local_evaluations);
+      if (value < model[static_cast<size_t>(g)]) {
+        model[static_cast<size_t>(g)] = value;
+        c.argmin[static_cast<size_t>(g)] = start;
+      }
+    }
+  };
+  profile_at(centre, -1);
+  for (int g = centre + 1; g < n; ++g) profile_at(g, g - 1);
+  for (int g = centre - 1; g >= 0; --g) profile_at(g, g + 1);
+  c.fitness.resize(static_cast<size_t>(n));
+  c.sd.resize(static_cast<size_t>(n));
+  for (int g = 0; g < n; ++g) {
+    c.sd[static_cast<size_t>(g)] = gp.predict(c.argmin[static_cast<size_t>(g)]).sd;
+    c.fitness[static_cast<size_t>(g)] = gp.from_model(model[static_cast<size_t>(g)]);
+  }
+  return slice.evaluations;
+}
+
+}  // namespace
+
+ProfileResult profile_fitness(const std::vector<TrainingRow>& rows, double relative_band, const ProfileOptions& options) {
+  options.Validate();
+  if (!(relative_band >= 0) || !std::isfinite(relative_band))
+    throw std::invalid_argument("profile: relative_band = " + std::to_string(relative_band) + " must be finite and >= 0");
+  const long d = rows.empty() ? 0 : static_cast<long>(rows.front().unit.size());
+  for (const auto& row : rows)
+    if (row.unit.size() != d) throw std::invalid_argument("profile: rows of different dimensions");
+
+  ProfileResult result;
+  result.relative_band = relative_band;
+  const std::vector<TrainingRow> distinct = distinct_finite_rows(rows);
+  result.finite_rows = static_cast<long>(distinct.size());
+  if (distinct.empty() || d == 0) {
+    result.message = "no parameter set with a finite fitness";
+    return result;
+  }
+  // Rows by fitness, best first (stable: ties keep their order).
+  std::vector<size_t> order(distinct.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return distinct[a].fitness < distinct[b].fitness; });
+  evaluated_ranges(result, distinct, order);
   if (!options.enabled) {
     result.status = ProfileStatus::disabled;
     result.message = "profile disabled: ranges over the evaluated sets only";
@@ -232,91 +330,17 @@ ProfileResult profile_fitness(const std::vector<TrainingRow>& rows, double relat
                      std::to_string(options.min_rows) + " needed to train an emulator: ranges over the evaluated sets only";
     return result;
   }
-
-  // 1. The emulator.
-  const auto fit_start = std::chrono::steady_clock::now();
-  const std::vector<TrainingRow> training = select_training_rows(distinct, options.max_training_rows);
-  Eigen::MatrixXd X(static_cast<Eigen::Index>(training.size()), d);
-  Eigen::VectorXd y(static_cast<Eigen::Index>(training.size()));
-  for (size_t i = 0; i < training.size(); ++i) {
-    X.row(static_cast<Eigen::Index>(i)) = training[i].unit.transpose();
-    y[static_cast<Eigen::Index>(i)] = training[i].fitness;
-  }
-  GpOptions gp_options = options.gp;
-  if (gp_options.log_transform == LogTransform::always && !(y.array() > 0).all()) gp_options.log_transform = LogTransform::never;
-  GaussianProcess gp(gp_options);
-  try {
-    gp.fit(X, y);
-  } catch (const std::exception& e) {
-    result.status = ProfileStatus::emulator_failed;
-    result.message = std::string("emulator not fitted (") + e.what() + "): ranges over the evaluated sets only";
-    result.fit_seconds = seconds_since(fit_start);
-    return result;
-  }
-  result.fit_seconds = seconds_since(fit_start);
-  if (!gp.fitted()) {
-    result.status = ProfileStatus::emulator_failed;
-    result.message = "emulator not fitted: ranges over the evaluated sets only";
-    return result;
-  }
-  result.training_rows = gp.points();
-  result.log_transformed = gp.log_transformed();
-  result.loo_relative_error = gp.leave_one_out().relative_error;
-  result.noise_sd = gp.noise_sd();
-  result.length_scales = gp.length_scales();
-  result.emulator_at_best = gp.from_model(gp.predict_mean(best.unit));
-
-  // 2. The profiles, each swept outwards from the grid value nearest the best row.
+  GaussianProcess gp;
+  if (!fit_emulator(gp, result, distinct, distinct[order.front()], options)) return result;
   const auto profile_start = std::chrono::steady_clock::now();
-  const int n = options.grid_points;
-  const size_t projected = std::min(order.size(), static_cast<size_t>(options.projected_starts));
   double smallest = HUGE_VAL;
   for (long k = 0; k < d; ++k) {
     auto& c = result.coordinates[static_cast<size_t>(k)];
-    c.grid.resize(static_cast<size_t>(n));
-    for (int g = 0; g < n; ++g) c.grid[static_cast<size_t>(g)] = static_cast<double>(g) / (n - 1);
-    std::vector<double> model(static_cast<size_t>(n), HUGE_VAL);
-    c.argmin.assign(static_cast<size_t>(n), Eigen::VectorXd());
-    SliceObjective slice;
-    slice.gp = &gp;
-    slice.fixed = static_cast<int>(k);
-    slice.point = Eigen::VectorXd(d);
-    const int centre = static_cast<int>(std::lround(best.unit[k] * (n - 1)));
-    auto profile_at = [&](int g, int neighbour) {
-      slice.value = c.grid[static_cast<size_t>(g)];
-      std::vector<Eigen::VectorXd> starts;
-      if (neighbour >= 0) starts.push_back(c.argmin[static_cast<size_t>(neighbour)]);
-      for (size_t s = 0; s < projected; ++s) starts.push_back(distinct[order[s]].unit);
-      std::mt19937_64 rng = seeded_rng(options.seed, k, g);
-      for (int s = 0; s < options.random_starts; ++s) {
-        Eigen::VectorXd u(d);
-        for (long j = 0; j < d; ++j) u[j] = uniform01(rng);
-        starts.push_back(u);
-      }
-      for (auto& start : starts) {
-        start[k] = slice.value;
-        const double value = minimise_slice(slice, start, options.local_evaluations);
-        if (value < model[static_cast<size_t>(g)]) {
-          model[static_cast<size_t>(g)] = value;
-          c.argmin[static_cast<size_t>(g)] = start;
-        }
-      }
-    };
-    profile_at(centre, -1);
-    for (int g = centre + 1; g < n; ++g) profile_at(g, g - 1);
-    for (int g = centre - 1; g >= 0; --g) profile_at(g, g + 1);
-    c.fitness.resize(static_cast<size_t>(n));
-    c.sd.resize(static_cast<size_t>(n));
-    for (int g = 0; g < n; ++g) {
-      c.sd[static_cast<size_t>(g)] = gp.predict(c.argmin[static_cast<size_t>(g)]).sd;
-      c.fitness[static_cast<size_t>(g)] = gp.from_model(model[static_cast<size_t>(g)]);
-      smallest = std::min(smallest, c.fitness[static_cast<size_t>(g)]);
-    }
-    result.emulator_evaluations += slice.evaluations;
+    result.emulator_evaluations += profile_coordinate(c, k, gp, distinct, order, options);
+    for (double f : c.fitness) smallest = std::min(smallest, f);
   }
   result.emulator_minimum = smallest;
-
-  // 3 and 4. Threshold, profile ranges, reported ranges.
+  // The threshold, the profile ranges and the reported ranges.
   result.threshold = std::max(result.best_fitness, result.emulator_minimum) * (1 + relative_band);
   for (auto& c : result.coordinates) {
     std::tie(c.profile_min, c.profile_max) = band_hull(c.grid, c.fitness, result.threshold);

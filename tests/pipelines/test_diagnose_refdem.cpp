@@ -2,7 +2,7 @@
 // contact discretisation, damping and effect laws than the engine that calibrates them, as measured
 // data are. The control needs no effect; a compliant right abutment is named there, with its
 // stiffness and its bounds, every stage of the loop checked on the way. Shortened searches (the
-// campaign's base 30 runs, 30 per candidate, two candidates) keep each under a minute; the full
+// campaign's base 30 runs, 30 per candidate, two candidates) keep each within 100 s; the full
 // table over every record is a benchmark (scripts/refdem_table.py, docs/diagnose.md). Each runs on
 // the round-off realisation DEMCAL_TEST_REALISATION names.
 #include "demcal/pipelines/diagnose.hpp"
