@@ -223,30 +223,31 @@ std::string frequency_text(const Diagnosis& d) {
 }
 
 std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
-  const std::string against = " N against " + format_number(noise, 3) + " N of noise" + frequency_text(d);
+  const std::string against = " N against " + format_number(noise, 3) + " N of noise";
+  const std::string shares = frequency_text(d) + ".";  // every sentence ends with the resamples' share
   switch (d.outcome) {
     case DiagnosisOutcome::missing_effect:
       if (const EffectCandidate* c = chosen_candidate(d))
         return "Missing: " + c->effect + (c->target.empty() ? "" : " at " + c->target) + ": " +
                fitted_effect_parameters(*c, d) + "; force error " + format_number(d.error_before, 3) + " → " +
-               format_number(c->error, 3) + against + ".";
+               format_number(c->error, 3) + against + shares;
       break;
     case DiagnosisOutcome::undecided: {
       std::string names;
       for (const auto& c : d.candidates)
         if (c.verdict == CandidateVerdict::tied) names += (names.empty() ? "" : " or ") + c.effect;
       return "Undecided" + (names.empty() ? "" : ": " + names) + ", the data do not settle it; force error " +
-             format_number(d.error_before, 3) + against + ".";
+             format_number(d.error_before, 3) + against + shares;
     }
     case DiagnosisOutcome::unexplained: {
       const auto tried = std::count_if(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return c.tried; });
       return "No effect found: force error " + format_number(d.error_before, 3) + against + "; none of the " +
-             std::to_string(tried) + " effects calibrated explains it.";
+             std::to_string(tried) + " effects calibrated explains it" + shares;
     }
     case DiagnosisOutcome::no_effect_needed: break;
   }
   return "No effect needed: force error " + format_number(d.error_before, 3) + against +
-         (std::isfinite(scatter) ? " and " + format_number(scatter, 3) + " N of simulation scatter" : "") + ".";
+         (std::isfinite(scatter) ? " and " + format_number(scatter, 3) + " N of simulation scatter" : "") + shares;
 }
 
 void detail::add_note(Diagnosis& d, const std::string& note) {

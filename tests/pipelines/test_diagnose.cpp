@@ -454,6 +454,10 @@ TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {
   select_effect(d, DiagnoseOptions{});
   EXPECT_EQ(d.outcome, DiagnosisOutcome::no_effect_needed) << d.verdict;
   EXPECT_EQ(verdict_headline(d, 44, 5), "No effect needed: force error 60 N against 44 N of noise and 5 N of simulation scatter.");
+  d.frequency.resamples = 200;  // the resamples' share ends the sentence
+  d.frequency.verdict = 0.985;
+  EXPECT_EQ(verdict_headline(d, 44, 5), "No effect needed: force error 60 N against 44 N of noise and 5 N of simulation "
+                                        "scatter; chosen in 98.5 % of 200 resamples.");
 }
 
 TEST(Evidence, AnEffectThatPassesWhileAnotherFitsBetterIsNotChosen) {
