@@ -19,14 +19,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// RMS force error over every channel: sqrt of the mean of the per-channel mean squares.
-double overall_error(const std::vector<ChannelResidual>& residuals) {
-  if (residuals.empty()) return Diagnosis::kNaN;
-  double sum = 0;
-  for (const auto& c : residuals) sum += c.rms * c.rms;
-  return std::sqrt(sum / static_cast<double>(residuals.size()));
-}
-
 // `best` with every free parameter of `config` moved by k x 1e-7 of itself: a set that differs from
 // it by far less than anything physical (the scatter runs).
 std::map<std::string, double> nudged(const std::map<std::string, double>& best, const CampaignConfig& config, int k) {
@@ -38,6 +30,13 @@ std::map<std::string, double> nudged(const std::map<std::string, double>& best, 
 }  // namespace
 
 std::string key_of(const ChannelResidual& c) { return c.case_name + "/" + c.channel; }
+
+double overall_error(const std::vector<ChannelResidual>& residuals) {
+  if (residuals.empty()) return Diagnosis::kNaN;
+  double sum = 0;
+  for (const auto& c : residuals) sum += c.rms * c.rms;
+  return std::sqrt(sum / static_cast<double>(residuals.size()));
+}
 
 double overall(const std::map<std::string, double>& per_channel) {
   double sum = 0;

@@ -43,6 +43,8 @@ std::string key_of(const ChannelResidual& c);  // "<case>/<channel>"
 // Root mean square of per-channel values ("<case>/<channel>" -> N), NaN ones left out; 0 when none.
 double overall(const std::map<std::string, double>& per_channel);
 double overall_noise(const std::vector<ChannelResidual>& residuals);  // RMS of the channels' noise, N
+// RMS force error over every channel: sqrt of the mean of the per-channel mean squares (NaN: none).
+double overall_error(const std::vector<ChannelResidual>& residuals);
 void progress(const DiagnoseOptions& o, const std::string& line);     // a progress line on stderr
 bool is_held_out(const std::string& case_name, const std::vector<std::string>& held_out_cases);
 

@@ -52,12 +52,6 @@ bool resampled(std::vector<ChannelResidual>& fit, const std::vector<std::vector<
   return true;
 }
 
-double overall_rms(const std::vector<ChannelResidual>& fit) {
-  double sum = 0;
-  for (const auto& c : fit) sum += c.rms * c.rms;
-  return std::sqrt(sum / static_cast<double>(std::max<std::size_t>(1, fit.size())));
-}
-
 }  // namespace
 
 std::string detail::percent(double share) { return format_number(100 * share, 3) + " %"; }
@@ -81,6 +75,7 @@ Diagnosis::VerdictFrequency verdict_frequency(const Diagnosis& diagnosis, const 
   std::mt19937_64 random(seed);
   std::map<std::string, long> counts;
   const auto& grid = diagnosis.base_residuals;
+  Diagnosis d = diagnosis;  // each resample sets every field the selection reads and writes
   for (int r = 0; r < options.resamples; ++r) {
     std::vector<std::vector<std::size_t>> indices;
     for (std::size_t c = 0; c < grid.size(); ++c) {
@@ -89,19 +84,18 @@ Diagnosis::VerdictFrequency verdict_frequency(const Diagnosis& diagnosis, const 
       indices.push_back(block_resample(n, static_cast<std::size_t>(std::lround(static_cast<double>(n) / points)), random));
     }
     const auto pick = [&](std::size_t runs) { return std::uniform_int_distribution<std::size_t>(0, runs - 1)(random); };
-    Diagnosis d = diagnosis;
     const std::size_t b = pick(base_runs.residuals.size());
     d.base_residuals = base_runs.residuals[b];
     if (b < base_runs.held_out_rms.size()) d.held_out_rms = base_runs.held_out_rms[b];
     if (!resampled(d.base_residuals, indices)) return {};
-    d.error_before = overall_rms(d.base_residuals);
+    d.error_before = overall_error(d.base_residuals);
     for (auto& c : d.candidates) {
       if (!c.tried || c.run_residuals.empty()) continue;
       const std::size_t k = pick(c.run_residuals.size());
       c.residuals = c.run_residuals[k];
       if (k < c.run_held_out_rms.size()) c.held_out_rms = c.run_held_out_rms[k];
       if (resampled(c.residuals, indices)) {
-        c.error = overall_rms(c.residuals);
+        c.error = overall_error(c.residuals);
         c.score = information_criterion_change(d.base_residuals, c.residuals, c.effect_parameters, effective_points);
       } else {
         c.error = c.score = EffectCandidate::kNaN;
