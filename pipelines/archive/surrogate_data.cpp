@@ -76,7 +76,7 @@ Eigen::VectorXd curve_outputs(const smoothing::Curve& run, const CurveGrid& grid
   for (const auto& c : grid.channels) {
     if (!run.has_column(c.column) || !run.has_column(grid.force_column)) return {};
     const auto envelope = smoothing::loading_envelope(smoothing::series(run, c.column, grid.force_column));
-    if (envelope.x.size() < smoothing::fewest_simulated_points(grid.objective_window)) return {};
+    if (envelope.x.empty()) return {};
     for (int k = 0; k < grid.points; ++k) outputs[i++] = smoothing::interpolate(envelope, grid.displacement(c, k));
     outputs[i++] = envelope.x.back();
   }

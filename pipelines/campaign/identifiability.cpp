@@ -26,7 +26,8 @@ Identifiability compute_identifiability(const std::vector<ParameterSet>& all, co
   id.band_fitness = top.front().fitness * (1 + relative_band);
   for (const auto& name : names) {
     const double best = top.front().params.at(name);
-    id.parameters[name] = {.best = best, .min = best, .max = best, .evaluated_min = best, .evaluated_max = best};
+    ParameterRange& range = id.parameters[name];
+    range.best = range.min = range.max = range.evaluated_min = range.evaluated_max = best;
   }
   for (const auto& s : top) {
     if (s.fitness > id.band_fitness) break;

@@ -36,6 +36,22 @@ int candidates_to_calibrate(bool splits, const DiagnoseOptions& options) {
   return std::max(options.candidates, options.candidates_at_split);
 }
 
+std::vector<double> candidate_start(const optimise::ParameterSpace& space, const std::map<std::string, double>& warm,
+                                    const std::map<std::string, double>& best) {
+  const auto names = space.free_names();
+  const auto n = static_cast<Eigen::Index>(names.size());
+  const Eigen::VectorXd centre = space.to_physical(Eigen::VectorXd::Constant(n, 0.5));
+  const Eigen::VectorXd lower = space.lower_bounds(), upper = space.upper_bounds();
+  std::vector<double> start;
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const auto& name = names[static_cast<std::size_t>(k)];
+    const auto from_warm = warm.find(name), from_best = best.find(name);
+    const double v = from_warm != warm.end() ? from_warm->second : from_best != best.end() ? from_best->second : centre(k);
+    start.push_back(std::clamp(v, lower(k), upper(k)));
+  }
+  return start;
+}
+
 namespace detail {
 
 ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, const std::vector<std::string>& targets,
@@ -140,16 +156,9 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   c.identifiability_profile.enabled = false;
   const bool local = options.candidate_algorithm.rfind("nlopt:", 0) == 0;
   if (local || options.candidate_algorithm == "bo") {
-    // Warm start: the base best with the effect at its best-explaining probe, clipped to the box
-    // (the local search's start; the first point of the Bayesian search's design).
-    const auto names = space.free_names();
-    const Eigen::VectorXd lower = space.lower_bounds(), upper = space.upper_bounds();
-    c.optimiser.initial_point.clear();
-    for (std::size_t i = 0; i < names.size(); ++i) {
-      const auto it = warm.find(names[i]);
-      const double v = it != warm.end() ? it->second : best.at(names[i]);
-      c.optimiser.initial_point.push_back(std::clamp(v, lower(static_cast<Eigen::Index>(i)), upper(static_cast<Eigen::Index>(i))));
-    }
+    // Warm start: the base best with the effect at its best-explaining probe (the local search's
+    // start; the first point of the Bayesian search's design).
+    c.optimiser.initial_point = candidate_start(space, warm, best);
     if (local) {
       c.optimiser.initial_step = options.candidate_initial_step;
       c.polish.enabled = false;

@@ -240,9 +240,12 @@ std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
              format_number(d.error_before, 3) + against + shares;
     }
     case DiagnosisOutcome::unexplained: {
-      const auto tried = std::count_if(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return c.tried; });
-      return "No effect found: force error " + format_number(d.error_before, 3) + against + "; none of the " +
-             std::to_string(tried) + " effects calibrated explains it" + shares;
+      const auto fitted =
+          std::count_if(d.candidates.begin(), d.candidates.end(), [](const auto& c) { return c.tried && std::isfinite(c.error); });
+      return "No effect found: force error " + format_number(d.error_before, 3) + against + "; " +
+             (fitted == 0 ? std::string("no candidate effect could be fitted")
+                          : "none of the " + std::to_string(fitted) + " effects calibrated explains it") +
+             shares;
     }
     case DiagnosisOutcome::no_effect_needed: break;
   }

@@ -181,14 +181,22 @@ void no_effect_verdict(Diagnosis& d, const std::vector<EffectCandidate*>& short_
   const EffectCandidate* closest = nullptr;
   for (const auto* c : short_of_criterion)
     if (closest == nullptr || c->error < closest->error) closest = c;
-  if (closest != nullptr && d.error_before > kUnexplainedRatio * floor) {
+  if (d.error_before > kUnexplainedRatio * floor) {
     d.outcome = DiagnosisOutcome::unexplained;
     d.verdict = "No effect found: the base fit misses the curves by " + format_number(d.error_before / floor, 2) +
-                " x the noise and scatter combined (" + errors + "), so the model lacks something, but none of the "
-                "candidate effects explains enough of it for its extra parameters (closest: " + closest->effect +
-                ", " + format_number(d.error_before, 3) + " -> " + format_number(closest->error, 3) + " N, criterion " +
-                format_number(closest->score, 3) + "). The missing effect is not among those tried, or their searches "
-                "did not reach its fit." + unfitted_data_note(d);
+                " x the noise and scatter combined (" + errors + "), so the model lacks something, but ";
+    if (closest != nullptr) {
+      d.verdict += "none of the candidate effects explains enough of it for its extra parameters (closest: " + closest->effect +
+                   ", " + format_number(d.error_before, 3) + " -> " + format_number(closest->error, 3) + " N, criterion " +
+                   format_number(closest->score, 3) + "). The missing effect is not among those tried, or their searches "
+                   "did not reach its fit.";
+    } else {
+      std::string reasons;
+      for (const auto& c : d.candidates)
+        if (!c.reason.empty()) reasons += (reasons.empty() ? "" : "; ") + c.effect + ": " + c.reason;
+      d.verdict += "no candidate effect could be fitted (" + (reasons.empty() ? std::string("none was tried") : reasons) + ").";
+    }
+    d.verdict += unfitted_data_note(d);
   } else {
     d.outcome = DiagnosisOutcome::no_effect_needed;
     d.verdict = "No effect needed: none of the candidate effects explains the residual better than its extra "

@@ -101,7 +101,9 @@ class InterpolationSweep {
 
 std::pair<double, double> objective_window(const XYSeries& e, const XYSeries& s, ObjectiveWindow window,
                                            const std::string& label) {
-  const bool common = window == ObjectiveWindow::common;
+  // A simulated gauge that never passed its first reading shares no range with the measurement:
+  // it is compared over the measured one, held at that reading, under either window.
+  const bool common = window == ObjectiveWindow::common && s.x.size() > 1;
   const double lower = common ? std::max(e.x.front(), s.x.front()) : e.x.front();
   const double upper = common ? std::min(e.x.back(), s.x.back()) : e.x.back();
   if (!(upper > lower))
@@ -111,8 +113,6 @@ std::pair<double, double> objective_window(const XYSeries& e, const XYSeries& s,
   return {lower, upper};
 }
 
-std::size_t fewest_simulated_points(ObjectiveWindow window) { return window == ObjectiveWindow::measured ? 1 : 2; }
-
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
                       const std::string& label, ObjectiveWindow window) {
   if (points < 2) throw std::invalid_argument("channel_misfit: points must be >= 2");
@@ -120,9 +120,7 @@ double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, in
   const XYSeries s = loading_envelope(simulation);
   if (e.x.size() < 2)
     throw CurveError(label + ": the experiment has fewer than 2 loading points (finite, increasing displacement)");
-  if (s.x.size() < fewest_simulated_points(window))
-    throw CurveError(label + ": the simulation has " + (s.x.empty() ? "no loading point" : "fewer than 2 loading points") +
-                     " (finite, increasing displacement)");
+  if (s.x.empty()) throw CurveError(label + ": the simulation has no loading point (finite, increasing displacement)");
   const auto [lower, upper] = objective_window(e, s, window, label);
   // The displacements increase with k: each series is walked once instead of searched per point.
   InterpolationSweep at_e(e), at_s(s);
@@ -286,8 +284,7 @@ std::vector<FitnessResult> Objective2::evaluate_batch(const std::vector<Curve>& 
       XYSeries start_only;
       if (r.status != SmoothStatus::ok) {
         start_only = loading_envelope(input);
-        if (r.status != SmoothStatus::too_few_points || start_only.x.size() != 1 ||
-            fewest_simulated_points(objective_.window) != 1)
+        if (r.status != SmoothStatus::too_few_points || start_only.x.size() != 1)
           throw CurveError(label + ": cannot smooth the simulation: " + r.message);
         fit = &start_only;
       }

@@ -407,8 +407,8 @@ TEST(Residual, AMeasurementGapAtAFastEventIsReported) {
 }
 
 // A simulated gauge that only moves backwards (its envelope the first reading alone) is compared
-// as holding that reading's force over the measured window, in the residual analysis and on a base
-// fit's grid: a poor fit, not a failed run.
+// as holding that reading's force over the measured window, under either window, in the residual
+// analysis and on a base fit's grid: a poor fit, not a failed run.
 TEST(Residual, AGaugeThatOnlyMovedBackwardsIsHeldAtItsStart) {
   smoothing::XYSeries measured, backwards;
   for (int i = 0; i <= 40; ++i) {
@@ -422,7 +422,9 @@ TEST(Residual, AGaugeThatOnlyMovedBackwardsIsHeldAtItsStart) {
   EXPECT_NEAR(held.rms, 100.0 * 40 * std::sqrt((2.0 * 199 + 1) / (6 * 199)), 1e-6 * held.rms);  // RMS of a 0-4000 N ramp
   const ChannelResidual fit = analyse_channel(measured, measured, 200, smoothing::ObjectiveWindow::measured);
   EXPECT_NEAR(resimulated(fit, backwards).rms, held.rms, 1e-9 * held.rms);
-  EXPECT_THROW(analyse_channel(measured, backwards, 200, smoothing::ObjectiveWindow::common), smoothing::CurveError);
+  const ChannelResidual common = analyse_channel(measured, backwards, 200, smoothing::ObjectiveWindow::common);
+  EXPECT_EQ(common.rms, held.rms);  // no shared range: the paper's window is the measured one too
+  EXPECT_EQ(common.coverage, 1.0);
   EXPECT_THROW(resimulated(fit, smoothing::XYSeries{}), smoothing::CurveError);
 }
 
@@ -450,6 +452,17 @@ TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {
   EXPECT_EQ(d.outcome, DiagnosisOutcome::unexplained) << d.verdict;  // 232 N is far above 44 N
   EXPECT_EQ(verdict_headline(d, 44, 5),
             "No effect found: force error 232 N against 44 N of noise; none of the 1 effects calibrated explains it.");
+  EffectCandidate unfitted;  // a candidate no calibration could fit says nothing: the base still misses
+  unfitted.effect = "joint-closure";
+  unfitted.reason = "over the simulation budget";
+  d.candidates = {unfitted};
+  select_effect(d, DiagnoseOptions{});
+  EXPECT_EQ(d.outcome, DiagnosisOutcome::unexplained) << d.verdict;
+  EXPECT_NE(d.verdict.find("no candidate effect could be fitted (joint-closure: over the simulation budget)"), std::string::npos)
+      << d.verdict;
+  EXPECT_EQ(verdict_headline(d, 44, 5), "No effect found: force error 232 N against 44 N of noise; no candidate effect could be fitted.");
+  d.candidates = {c};
+  d.candidates.front().score = -1;
   d.error_before = 60;
   select_effect(d, DiagnoseOptions{});
   EXPECT_EQ(d.outcome, DiagnosisOutcome::no_effect_needed) << d.verdict;
@@ -811,6 +824,25 @@ TEST(Evidence, AScatterAboveTheNoiseDoesNotExcuseTheBase) {
   EXPECT_EQ(split_response_note(d, uncapped), "");
   d.scatter = {{"main/load_vertical", 40}};  // a reproducible fit: no note
   EXPECT_EQ(split_response_note(d, options), "");
+}
+
+// A candidate's search starts at the effect's best probe over the base fit; an effect none of whose
+// probes could be scored (every one failed on a gauge, measured on the records of another code's
+// wider arch) starts at the middle of its range instead of failing its calibration.
+TEST(Evidence, ACandidateWhoseProbesAllFailedStartsMidRange) {
+  optimise::ParameterSpace space;
+  space.add("kn", 1e8, 1e10, optimise::ParameterSpec::Scale::log10)
+      .add("friction_deg", 25, 45)
+      .add("closure_max", 1e-5, 1e-3, optimise::ParameterSpec::Scale::log10);
+  const std::map<std::string, double> best = {{"kn", 7.5e9}, {"friction_deg", 35.3}};
+  const auto probed = candidate_start(space, {{"closure_max", 2e-4}, {"kn", 2e10}}, best);
+  ASSERT_EQ(probed.size(), 3u);
+  EXPECT_EQ(probed[0], 1e10);  // the probe's value, clipped to the box
+  EXPECT_EQ(probed[1], 35.3);
+  EXPECT_EQ(probed[2], 2e-4);
+  const auto unprobed = candidate_start(space, {}, best);
+  EXPECT_EQ(unprobed[0], 7.5e9);
+  EXPECT_NEAR(unprobed[2], 1e-4, 1e-16);  // the log scale's middle
 }
 
 // Where the base response splits, step 4 does not prune by signature: on the goal study's

@@ -486,6 +486,12 @@ bool response_splits(double scatter, double noise, const DiagnoseOptions& option
 // splits options.candidates_at_split (0: every effect), never fewer than candidates.
 int candidates_to_calibrate(bool splits, const DiagnoseOptions& options);
 
+// The first point of a candidate's search over `space` (its free parameters, in order): each from
+// `warm` (the effect's best probe), else from `best` (the base fit), else the middle of its range
+// (an effect none of whose probes could be scored), clipped to the box.
+std::vector<double> candidate_start(const optimise::ParameterSpace& space, const std::map<std::string, double>& warm,
+                                    const std::map<std::string, double>& best);
+
 // A sentence for the verdict when the base fit's re-runs scatter by more than
 // options.scatter_floor_ratio x the noise: the fit sits where the model's response splits, the
 // floor counted that scatter only up to the cap (error_floor), and the candidates were not chosen
@@ -520,8 +526,8 @@ std::string sparse_measurement_note(const Diagnosis& diagnosis);
 // tied (the criterion would name the worse fit); and so are one accepted and a candidate that
 // lowers the error and falls short of its criterion by less than tie_margin. None: "No effect needed", or
 // "No effect found" when the base error exceeds kUnexplainedRatio x the noise and scatter combined
-// and a candidate was fitted (the model lacks something the candidates do not supply; the closest
-// is named).
+// (the model lacks something the candidates do not supply; the closest fit is named, or, where no
+// candidate could be fitted, why each was not).
 constexpr double kUnexplainedRatio = 2;
 void select_effect(Diagnosis& diagnosis, const DiagnoseOptions& options);
 

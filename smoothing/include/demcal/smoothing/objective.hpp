@@ -73,18 +73,15 @@ XYSeries loading_envelope(const XYSeries& series);
 // Linear interpolation of a strictly increasing series at x (clamped to the end values outside).
 double interpolate(const XYSeries& envelope, double x);
 
-// Step 2's window [lower, upper] of two loading envelopes. Throws CurveError (naming `label`) when
-// it is empty (with `common`: the ranges do not overlap).
+// Step 2's window [lower, upper] of two loading envelopes. A one-point simulated envelope (a gauge
+// that never passed its first reading) shares no range with the measurement and gets the measured
+// window under either choice, held at that point's force. Throws CurveError (naming `label`) when
+// the window is empty (with `common`: the ranges do not overlap).
 std::pair<double, double> objective_window(const XYSeries& experiment_envelope, const XYSeries& simulation_envelope,
                                            ObjectiveWindow window, const std::string& label = "channel");
 
-// The fewest simulated envelope points a window can score: 1 with `measured` (held over the
-// window), 2 with `common`.
-std::size_t fewest_simulated_points(ObjectiveWindow window);
-
 // f_c of one channel from two series (steps 1–4). Throws CurveError (naming `label`) when the
-// experiment has fewer than 2 envelope points, the simulation fewer than fewest_simulated_points,
-// or the window is empty.
+// experiment has fewer than 2 envelope points, the simulation none, or the window is empty.
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
                       const std::string& label = "channel", ObjectiveWindow window = ObjectiveWindow::common);
 
