@@ -9,6 +9,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <mutex>
 #include <stdexcept>
 #include <vector>
 
@@ -103,6 +104,13 @@ const LoadedPlugin& plugin() {
   return loaded;
 }
 
+// LibTorch's products call the system BLAS, which may not be safe to call from two threads at once
+// (Debian's serial OpenBLAS): every training in the process takes its turn.
+std::mutex& training_mutex() {
+  static std::mutex m;
+  return m;
+}
+
 }  // namespace
 
 std::string libtorch_plugin_path() { return plugin().path; }
@@ -116,6 +124,7 @@ std::vector<float> train_regression_ensemble(const RegressionBatch& b) {
     throw std::invalid_argument("train_regression_ensemble: the batch's sizes disagree");
   std::vector<float> trained;
   std::string error;
+  const std::lock_guard<std::mutex> one_at_a_time(training_mutex());
   if (plugin().regression(&b, &trained, &error) != 0)
     throw std::runtime_error("LibTorch regression ensemble: " + error);
   return trained;
@@ -126,6 +135,7 @@ namespace detail {
 TrainingOutput train_libtorch(const TrainingBatch& batch, const SmootherOptions& options) {
   TrainingOutput output;
   std::string error;
+  const std::lock_guard<std::mutex> one_at_a_time(training_mutex());
   if (plugin().train(&batch, &options, &output, &error) != 0)
     throw std::runtime_error("libtorch smoother backend: " + error);
   return output;

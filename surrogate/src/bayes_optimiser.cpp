@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <future>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -130,6 +131,8 @@ class BayesOptimiser final : public optimise::Optimiser {
     s["fits"] = fits;
     s["batch"] = batch_;
     s["batch_reason"] = batch_reason_;
+    s["overlap"] = overlap_;
+    s["prefitted"] = prefitted_ || next_model_.valid();
     return s;
   }
 
@@ -151,6 +154,8 @@ class BayesOptimiser final : public optimise::Optimiser {
       for (const auto& fit : state.at("fits")) fits_.push_back({fit.at(0).get<long>(), fit.at(1).get<bool>()});
       batch_ = state.at("batch").get<int>();
       batch_reason_ = state.at("batch_reason").get<std::string>();
+      overlap_ = state.value("overlap", false);
+      prefitted_ = state.value("prefitted", false);
     } catch (const nlohmann::json::exception& e) {
       throw std::invalid_argument(std::string("bo state: ") + e.what());
     }
@@ -158,6 +163,8 @@ class BayesOptimiser final : public optimise::Optimiser {
       throw std::invalid_argument("bo state: told_x, told_f and told_predictions differ in length");
     if (pending_predictions_.size() != pending_units_.size())
       throw std::invalid_argument("bo state: pending_units and pending_predictions differ in length");
+    if (next_model_.valid()) next_model_.wait();
+    next_model_ = {};
     model_ = SurrogateModel();
     replayed_ = false;
   }
@@ -193,14 +200,51 @@ class BayesOptimiser final : public optimise::Optimiser {
   // The model for the next proposal: a full refit when there is no model yet or the rows grew by
   // refit_growth since the last full one, else an update; recorded in the state. False: unusable.
   bool refresh_model(const std::vector<TrainingRow>& rows) {
+    fits_.push_back({static_cast<long>(told_x_.size()), fit_model(rows, full_refit_due())});
+    return model_.usable();
+  }
+
+  // Whether the next fit is a full one: no model yet, or the rows grew by refit_growth since the
+  // last full fit.
+  bool full_refit_due() const {
     long last_full = 0;
     for (const auto& [told, full] : fits_)
       if (full) last_full = told;
-    const long told = static_cast<long>(told_x_.size());
     const double rows_now = static_cast<double>(warm_.size() + told_x_.size());
-    const bool full = !model_.usable() || rows_now >= surrogate_.refit_growth * static_cast<double>(warm_.size() + last_full);
-    fits_.push_back({told, fit_model(rows, full)});
-    return model_.usable();
+    return !model_.usable() || rows_now >= surrogate_.refit_growth * static_cast<double>(warm_.size() + last_full);
+  }
+
+  // The model for the round after this one, fitted on `rows` on another thread while this round's
+  // points are simulated (overlap_). Recorded in fits_ as requested, so that a replay, which takes
+  // the same update-or-refit path, ends with the same model.
+  void start_next_fit(const std::vector<TrainingRow>& rows) {
+    const bool full = full_refit_due();
+    fits_.push_back({static_cast<long>(told_x_.size()), full});
+    next_model_ = std::async(std::launch::async, [this, model = model_, rows, full]() mutable {
+      if (full || !model.update(rows)) {
+        model = SurrogateModel(surrogate_, hooks_);
+        model.fit(rows);
+      }
+      return model;
+    });
+  }
+
+  // The model this round proposes with: the one fitted while the last round ran (overlap_, or the
+  // replayed last fit of a restored optimiser), else a fit now. The points told since its rows are
+  // returned in `unseen`.
+  bool model_for_round(const std::vector<TrainingRow>& rows, std::vector<Eigen::VectorXd>& unseen) {
+    bool usable;
+    if (next_model_.valid()) {
+      model_ = next_model_.get();
+      usable = model_.usable();
+    } else if (prefitted_) {
+      usable = model_.usable();
+    } else {
+      usable = refresh_model(rows);
+    }
+    prefitted_ = false;
+    for (size_t i = static_cast<size_t>(fits_.back().first); i < told_x_.size(); ++i) unseen.push_back(told_x_[i]);
+    return usable;
   }
 
   // The model's score of every point, on `threads` threads (each score on its own: the same
@@ -228,7 +272,9 @@ class BayesOptimiser final : public optimise::Optimiser {
     Eigen::VectorXd random_point(d);
     for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
     const auto rows = rows_until(told_x_.size());
-    if (!refresh_model(rows)) {
+    std::vector<Eigen::VectorXd> unseen;
+    if (!model_for_round(rows, unseen)) {
+      if (overlap_ && another_round_after(count)) start_next_fit(rows);
       for (long i = 0; i < count; ++i) {
         if (i > 0)
           for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
@@ -256,7 +302,8 @@ class BayesOptimiser final : public optimise::Optimiser {
     const std::vector<double> score = score_all(searched);
     // Penalty radius: half the typical spacing of the finite rows, 0.5 n^(-1/d).
     const double radius = 0.5 * std::pow(std::max<double>(1.0, static_cast<double>(order.size())), -1.0 / d);
-    std::vector<Eigen::VectorXd> picked;
+    // Points the model has not seen yet (told since its rows) are penalised like the round's own.
+    std::vector<Eigen::VectorXd> picked = unseen;
     PenalisedScore acquisition{&model_, *std::min_element(score.begin(), score.end()), radius, &picked};
     std::vector<double> lower(static_cast<size_t>(d), 0.0), upper(static_cast<size_t>(d), 1.0), step(static_cast<size_t>(d), 0.05);
     for (long b = 0; b < count; ++b) {
@@ -291,12 +338,17 @@ class BayesOptimiser final : public optimise::Optimiser {
       pending_predictions_.push_back({{"fitness", p.fitness}, {"low90", lo}, {"high90", hi}});
     }
     adapt_batch(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    if (overlap_ && another_round_after(count)) start_next_fit(rows);
   }
 
-  // Cost-aware batches, decided once, after the third proposal round (a full fit and two updates,
+  bool another_round_after(long count) const { return options_.evaluation_budget() - evaluations_ - count > 0; }
+
+  // Cost-aware rounds, decided once, after the third proposal round (a full fit and two updates,
   // as later rounds mix them): when a round's mean model time exceeds cost_ratio x the wall time of
   // a round of simulations (one simulation per worker, hooks_.seconds_per_simulation), later
-  // rounds propose up to kMaxBatchFactor x as many points.
+  // rounds propose up to kMaxBatchFactor x as many points; otherwise the model fits while the
+  // simulations run (overlap_), and each round proposes with the model of the rows before the last
+  // round, its points penalised as the round's own.
   void adapt_batch(double round_seconds) {
     if (!batch_reason_.empty() || !hooks_.seconds_per_simulation || !std::isfinite(surrogate_.cost_ratio)) return;
     model_seconds_ += round_seconds;
@@ -306,7 +358,9 @@ class BayesOptimiser final : public optimise::Optimiser {
     if (!(simulation > 0)) return;
     const double ratio = model_seconds / (surrogate_.cost_ratio * simulation);
     const int factor = static_cast<int>(std::clamp(std::ceil(ratio), 1.0, static_cast<double>(kMaxBatchFactor)));
-    batch_reason_ = (factor > 1 ? "batches of " + std::to_string(batch_ * factor) : std::string("batches kept")) +
+    overlap_ = factor == 1;
+    batch_reason_ = (factor > 1 ? "batches of " + std::to_string(batch_ * factor)
+                                : std::string("batches kept, the model fitted while the simulations run")) +
                     ": a proposal round took " + format_number(model_seconds, 3) + " s of model time, a simulation " +
                     format_number(simulation, 3) + " s";
     batch_ *= factor;
@@ -328,8 +382,11 @@ class BayesOptimiser final : public optimise::Optimiser {
   std::vector<nlohmann::json> pending_predictions_;
   std::vector<std::pair<long, bool>> fits_;         // per proposal round: told points fitted, full refit
   bool pending_ = false;
+  bool overlap_ = false;    // the next round's model fits while this round's points are simulated
+  bool prefitted_ = false;  // restored: the replayed last fit is the next round's model
   bool replayed_ = true;
   SurrogateModel model_;
+  std::future<SurrogateModel> next_model_;  // the overlapping fit; last, so destroyed (waited for) first
 };
 
 }  // namespace

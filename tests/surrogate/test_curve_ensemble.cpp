@@ -278,3 +278,48 @@ TEST(BayesOptimiser, ProposesDistinctBatchesAndResumesAfterUpdatesExactly) {
   EXPECT_LT(straight.back(), straight.front() / 10) << "design best " << straight.front();
   EXPECT_EQ(run(4), straight);
 }
+
+// Simulations slower than the model (an external code): after the third round the cost rule keeps
+// the batch and fits each round's model while the round before is simulated. The rounds then
+// propose with a model one round old, which still reaches the basin; the history differs from the
+// rounds that wait for their model, and a run resumed after overlapping rounds (a fit in flight
+// when the state was saved) ends with the uninterrupted history.
+TEST(BayesOptimiser, SlowSimulationsOverlapTheFitsAndResumeExactly) {
+  const auto space = unit_square();
+  const auto o = bayes_options(26, 4);
+  SurrogateOptions s = mlp_options();
+  s.batch = 2;
+  s.mlp.epochs = 600;
+  CurveHooks hooks;
+  hooks.fitness = fitness_of;
+  hooks.outputs_at = [](const Eigen::VectorXd& unit) { return curve(unit); };
+  auto run = [&](const CurveHooks& h, int stop_after, std::string* reason) {
+    auto opt = make_bayes_optimiser(space, o, s, {}, h);
+    std::vector<double> history;
+    int round = 0;
+    while (!opt->done()) {
+      if (round++ == stop_after) {
+        const nlohmann::json state = nlohmann::json::parse(opt->save_state().dump());
+        EXPECT_TRUE(state.at("overlap").get<bool>()) << "saved after the decision";
+        EXPECT_TRUE(state.at("prefitted").get<bool>()) << "saved with the next round's fit started";
+        opt = make_bayes_optimiser(space, o, s, {}, h);
+        opt->load_state(state);
+      }
+      const auto batch = opt->ask();
+      std::vector<double> values;
+      for (const auto& x : batch) values.push_back(fitness_of(curve(space.to_unit(x))));
+      opt->tell(values);
+      history.push_back(opt->best_value());
+    }
+    if (reason) *reason = summarise_bayes_state(opt->save_state()).batch_reason;
+    return history;
+  };
+  CurveHooks slow = hooks;
+  slow.seconds_per_simulation = [] { return 1000.0; };
+  std::string reason;
+  const auto overlapped = run(slow, -1, &reason);
+  EXPECT_NE(reason.find("batches kept, the model fitted while the simulations run"), std::string::npos) << reason;
+  EXPECT_LT(overlapped.back(), overlapped.front() / 10) << "design best " << overlapped.front();
+  EXPECT_NE(run(hooks, -1, nullptr), overlapped) << "the rounds waiting for their model propose otherwise";
+  EXPECT_EQ(run(slow, 6, nullptr), overlapped);
+}
