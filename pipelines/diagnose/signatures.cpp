@@ -4,6 +4,8 @@
 // effect's calibration.
 #include "diagnose_internal.hpp"
 
+#include "demcal/dem/joints.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -21,6 +23,14 @@ namespace {
 
 // Where in its search range each effect parameter is probed for the signature: from strong to mild.
 constexpr double kProbeFractions[] = {0.2, 0.5, 0.8};
+// Joints probed for an effect at one joint: at most kMechanismJointTargets of the base fit's hinges
+// and sliding joints, then the joints beside its hinges up to kJointTargets in all. An effect at a
+// joint moves the mechanism: the base fit, which lacks it, hinges at the joint beside the one that
+// is open (measured on the wedge gap of the other code's records, journal/diagnose-studies.md,
+// "A gauge that never advanced; the other code's truths in demcal's engine").
+constexpr std::size_t kMechanismJointTargets = 4;
+constexpr std::size_t kJointTargets = 8;
+
 // Golden-section steps of the search of an effect's simplest form (search_simplest_form): from a
 // bracket of half the range to about 3 % of it, within the reference arch's cap valley.
 constexpr int kSimplestFormRefinements = 6;
@@ -143,7 +153,8 @@ std::vector<RunRequest> sensitivity_runs(const CampaignConfig& config, const std
 }
 
 // Candidate targets of an effect in this scene: each fixed block for support springs; joints for
-// a gap (the base fit's hinges first, then its sliding joints); else the effect's default.
+// a gap (the base fit's hinges first, then its sliding joints, then the joints beside its hinges);
+// else the effect's default.
 std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, const Evaluation& base,
                                                   const dem::Scene& scene) {
   std::vector<std::vector<std::string>> out;
@@ -153,13 +164,20 @@ std::vector<std::vector<std::string>> targets_for(const dem::Effect& effect, con
     return out;
   }
   if (effect.target != dem::EffectTarget::joint) return {{}};
+  const auto add = [&](const std::string& joint, std::size_t most) {
+    const std::vector<std::string> t{joint};
+    if (std::find(out.begin(), out.end(), t) == out.end() && out.size() < most) out.push_back(t);
+  };
+  std::vector<std::string> hinges;
   for (const char* key : {"hinges", "sliding_joints"})
     for (const auto& c : base.cases)
       if (c.details.contains(key) && c.details[key].is_array())
         for (const auto& joint : c.details[key]) {
-          const std::vector<std::string> t{joint.get<std::string>()};
-          if (std::find(out.begin(), out.end(), t) == out.end() && out.size() < 4) out.push_back(t);
+          add(joint.get<std::string>(), kMechanismJointTargets);
+          if (std::string(key) == "hinges") hinges.push_back(joint.get<std::string>());
         }
+  for (const auto& hinge : hinges)
+    for (const auto& joint : dem::joints_beside(scene, hinge)) add(joint, kJointTargets);
   return out;
 }
 

@@ -2,11 +2,13 @@
 // round trip that `demcal scene` + `demcal simulate` make, and runs its first steps sanely; what
 // they cannot build is refused at generation time with the flag named.
 #include "demcal/dem/generators.hpp"
+#include "demcal/dem/joints.hpp"
 #include "demcal/dem/simulation.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -208,4 +210,43 @@ TEST(WallGenerator, CourseAndUnitRangeValidatesAndRuns) {
           ++scenes;
         }
   EXPECT_EQ(scenes, 72);
+}
+
+// The joints beside a joint share one of its blocks, and are named as a run reports its joints.
+TEST(Joints, TheJointsBesideAJointShareOneOfItsBlocks) {
+  const Scene arch = make_arch(ArchOptions{});
+  const std::vector<std::string> beside = {"voussoir_4/voussoir_5", "voussoir_6/voussoir_7"};
+  EXPECT_EQ(joints_beside(arch, "voussoir_5/voussoir_6"), beside);
+  EXPECT_EQ(joints_beside(arch, "voussoir_6/voussoir_5"), beside);  // either order
+  EXPECT_EQ(joints_beside(arch, "abutment_left/voussoir_1"), std::vector<std::string>{"voussoir_1/voussoir_2"});
+  EXPECT_TRUE(joints_beside(arch, "voussoir_5/pier").empty());
+  EXPECT_TRUE(joints_beside(arch, "voussoir_5").empty());
+  // The names a run reports: each has joints beside it, none reported with its blocks the other way round.
+  const Recording r = validate_and_step(arch, "arch");
+  std::vector<std::string> reported;
+  for (const auto& j : r.joints) reported.push_back(j.name);
+  ASSERT_GE(reported.size(), 2u);
+  const auto reversed = [](const std::string& j) { return j.substr(j.find('/') + 1) + "/" + j.substr(0, j.find('/')); };
+  for (const auto& joint : reported) {
+    const auto around = joints_beside(arch, joint);
+    EXPECT_FALSE(around.empty()) << joint;
+    for (const auto& other : around)
+      EXPECT_EQ(std::find(reported.begin(), reported.end(), reversed(other)), reported.end()) << other << " beside " << joint;
+  }
+  // A wall's unit touches several: every joint beside shares a block with the joint and no joint twice.
+  const Scene wall = make_wall(WallOptions{});
+  const Recording w = validate_and_step(wall, "wall");
+  ASSERT_FALSE(w.joints.empty());
+  const std::string joint = w.joints.front().name;
+  const auto around = joints_beside(wall, joint);
+  EXPECT_GE(around.size(), 2u);
+  const auto blocks_of = [](const std::string& j) {
+    return std::make_pair(j.substr(0, j.find('/')), j.substr(j.find('/') + 1));
+  };
+  const auto [a, b] = blocks_of(joint);
+  for (const auto& other : around) {
+    const auto [c, d] = blocks_of(other);
+    EXPECT_TRUE(c == a || c == b || d == a || d == b) << other << " beside " << joint;
+    EXPECT_EQ(std::count(around.begin(), around.end(), other), 1) << other;
+  }
 }
