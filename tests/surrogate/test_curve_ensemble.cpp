@@ -195,6 +195,29 @@ demcal::optimise::OptimiserOptions bayes_options(long simulations, std::uint64_t
   return o;
 }
 
+// Rounds of `batch` points, with shorter full fits.
+SurrogateOptions batched_mlp(int batch) {
+  SurrogateOptions s = mlp_options();
+  s.batch = batch;
+  s.mlp.epochs = 600;
+  return s;
+}
+
+// One round: the optimiser's points simulated on the curve family and told.
+void simulate_round(demcal::optimise::Optimiser& opt, const demcal::optimise::ParameterSpace& space) {
+  std::vector<double> values;
+  for (const auto& x : opt.ask()) values.push_back(fitness_of(curve(space.to_unit(x))));
+  opt.tell(values);
+}
+
+// The curve family's hooks: the fitness of predicted curves, and a told point's curves.
+CurveHooks curve_hooks() {
+  CurveHooks hooks;
+  hooks.fitness = fitness_of;
+  hooks.outputs_at = [](const Eigen::VectorXd& unit) { return curve(unit); };
+  return hooks;
+}
+
 }  // namespace
 
 // "bo" with the mlp kind: the optimiser is told fitness values only and finds each told point's
@@ -217,10 +240,7 @@ TEST(BayesOptimiser, MlpKindFindsTheBasinAndResumesExactly) {
         opt = make_bayes_optimiser(space, o, mlp_options(), {}, hooks);
         opt->load_state(state);
       }
-      const auto batch = opt->ask();
-      std::vector<double> values;
-      for (const auto& x : batch) values.push_back(fitness_of(curve(space.to_unit(x))));
-      opt->tell(values);
+      simulate_round(*opt, space);
       history.push_back(opt->best_value());
     }
     EXPECT_EQ(opt->evaluations(), 20);
@@ -238,12 +258,8 @@ TEST(BayesOptimiser, MlpKindFindsTheBasinAndResumesExactly) {
 TEST(BayesOptimiser, ProposesDistinctBatchesAndResumesAfterUpdatesExactly) {
   const auto space = unit_square();
   const auto o = bayes_options(26, 4);
-  SurrogateOptions s = mlp_options();
-  s.batch = 3;
-  s.mlp.epochs = 600;
-  CurveHooks hooks;
-  hooks.fitness = fitness_of;
-  hooks.outputs_at = [](const Eigen::VectorXd& unit) { return curve(unit); };
+  const SurrogateOptions s = batched_mlp(3);
+  const CurveHooks hooks = curve_hooks();
   auto run = [&](int stop_after) {
     auto opt = make_bayes_optimiser(space, o, s, {}, hooks);
     std::vector<double> history;
@@ -287,12 +303,8 @@ TEST(BayesOptimiser, ProposesDistinctBatchesAndResumesAfterUpdatesExactly) {
 TEST(BayesOptimiser, SlowSimulationsOverlapTheFitsAndResumeExactly) {
   const auto space = unit_square();
   const auto o = bayes_options(26, 4);
-  SurrogateOptions s = mlp_options();
-  s.batch = 2;
-  s.mlp.epochs = 600;
-  CurveHooks hooks;
-  hooks.fitness = fitness_of;
-  hooks.outputs_at = [](const Eigen::VectorXd& unit) { return curve(unit); };
+  const SurrogateOptions s = batched_mlp(2);
+  const CurveHooks hooks = curve_hooks();
   auto run = [&](const CurveHooks& h, int stop_after, std::string* reason) {
     auto opt = make_bayes_optimiser(space, o, s, {}, h);
     std::vector<double> history;
@@ -305,10 +317,7 @@ TEST(BayesOptimiser, SlowSimulationsOverlapTheFitsAndResumeExactly) {
         opt = make_bayes_optimiser(space, o, s, {}, h);
         opt->load_state(state);
       }
-      const auto batch = opt->ask();
-      std::vector<double> values;
-      for (const auto& x : batch) values.push_back(fitness_of(curve(space.to_unit(x))));
-      opt->tell(values);
+      simulate_round(*opt, space);
       history.push_back(opt->best_value());
     }
     if (reason) *reason = summarise_bayes_state(opt->save_state()).batch_reason;
