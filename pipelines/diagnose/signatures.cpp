@@ -25,9 +25,9 @@ namespace {
 constexpr double kProbeFractions[] = {0.2, 0.5, 0.8};
 // Joints probed for an effect at one joint: at most kMechanismJointTargets of the base fit's hinges
 // and sliding joints, then the joints beside its hinges up to kJointTargets in all. An effect at a
-// joint moves the mechanism: the base fit, which lacks it, hinges at the joint beside the one that
-// is open (measured on the wedge gap of the other code's records, journal/diagnose-studies.md,
-// "A gauge that never advanced; the other code's truths in demcal's engine").
+// joint moves the mechanism, so the base fit, which lacks it, can hinge beside it (the wedge gap of
+// the other code's records: journal/diagnose-studies.md, "The wedge gap: the joints beside the
+// hinges, and the search's budget").
 constexpr std::size_t kMechanismJointTargets = 4;
 constexpr std::size_t kJointTargets = 8;
 
