@@ -129,6 +129,28 @@ bool settle_on_frequency(Diagnosis& d, const DiagnoseOptions& options) {
   std::string listed;
   for (const auto& [share, name] : shares) listed += (listed.empty() ? "" : ", ") + name + " in " + percent(share);
   const std::string choice = choice_of(d) == kNone ? "that no effect is needed" : d.chosen.front();
+  const std::string taken_again = "the selection taken again on " + std::to_string(f.resamples) +
+                                  " resamples of the data and of the fits' round-off";
+  if (f.none >= options.verdict_share) {  // most resamples settle on no effect: that is the verdict
+    for (auto& c : d.candidates)
+      if (c.verdict == CandidateVerdict::accepted || c.verdict == CandidateVerdict::tied) {
+        c.verdict = CandidateVerdict::rejected;
+        c.reason = "chosen in only " + percent(f.effects.count(c.effect) ? f.effects.at(c.effect) : 0.0) + " of " +
+                   std::to_string(f.resamples) + " resamples of the data and the fits' round-off; " + c.reason;
+      }
+    d.chosen.clear();
+    d.error_after = d.error_before;
+    const double noise = overall_noise(d.base_residuals), scatter = overall(d.scatter);
+    const bool unexplained = d.error_before > kUnexplainedRatio * error_floor(noise, scatter, options);
+    d.outcome = unexplained ? DiagnosisOutcome::unexplained : DiagnosisOutcome::no_effect_needed;
+    d.verdict = std::string(unexplained ? "No effect found" : "No effect needed") + ": the fits' median runs point to " +
+                choice + ", but " + taken_again + " finds no effect in " + percent(f.none) + " of them (" + listed +
+                "); RMS force error " + format_number(d.error_before, 3) + " N, noise about " + format_number(noise, 3) +
+                " N, simulation scatter about " + format_number(scatter, 3) + " N" +
+                (unexplained ? ", so the model lacks something the effects tried do not supply." : ".");
+    d.frequency.verdict = f.none;
+    return true;
+  }
   for (auto& c : d.candidates)
     if (c.tried && f.effects.count(c.effect) && f.effects.at(c.effect) > 0) {
       c.verdict = CandidateVerdict::tied;
@@ -138,10 +160,9 @@ bool settle_on_frequency(Diagnosis& d, const DiagnoseOptions& options) {
   d.chosen.clear();
   d.error_after = d.error_before;
   d.outcome = DiagnosisOutcome::undecided;
-  d.verdict = "The data do not settle it: the fits' median runs point to " + choice + ", but the selection taken again on " +
-              std::to_string(f.resamples) + " resamples of the data and of the fits' round-off reaches it in only " +
-              percent(f.verdict) + " of them (" + listed + "), fewer than the " + percent(options.verdict_share) +
-              " a verdict needs; the model is not extended.";
+  d.verdict = "The data do not settle it: the fits' median runs point to " + choice + ", but " + taken_again +
+              " reaches it in only " + percent(f.verdict) + " of them (" + listed + "), fewer than the " +
+              percent(options.verdict_share) + " a verdict needs; the model is not extended.";
   return true;
 }
 

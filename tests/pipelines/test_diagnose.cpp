@@ -659,6 +659,24 @@ TEST(Evidence, AVerdictThatOnlyALuckyRunReachesIsUndecided) {
   const std::string headline = verdict_headline(r.d, 50, 5);
   EXPECT_NE(headline.find("Undecided: support-compliance, the data do not settle it"), std::string::npos) << headline;
   EXPECT_NE(headline.find("; across 200 resamples: support-compliance "), std::string::npos) << headline;
+  // One run of ten fits: nine resamples in ten choose no effect, which becomes the verdict (the
+  // base misses by 4 x the noise: "no effect found").
+  ResampledCase lucky = resampled_case({true, false, false, false, false, false, false, false, false, false});
+  ASSERT_EQ(lucky.d.outcome, DiagnosisOutcome::missing_effect) << lucky.d.verdict;
+  lucky.d.frequency = verdict_frequency(lucky.d, lucky.base, lucky.effective_points, options, 1);
+  ASSERT_GE(lucky.d.frequency.none, options.verdict_share);
+  const double none = lucky.d.frequency.none;
+  EXPECT_TRUE(settle_on_frequency(lucky.d, options));
+  EXPECT_EQ(lucky.d.outcome, DiagnosisOutcome::unexplained) << lucky.d.verdict;
+  EXPECT_TRUE(lucky.d.chosen.empty());
+  EXPECT_EQ(lucky.d.candidates.front().verdict, CandidateVerdict::rejected);
+  EXPECT_EQ(lucky.d.frequency.verdict, none);
+  EXPECT_NE(lucky.d.verdict.find("No effect found: the fits' median runs point to support-compliance, but the selection "
+                                 "taken again on 200 resamples of the data and of the fits' round-off finds no effect in "),
+            std::string::npos)
+      << lucky.d.verdict;
+  EXPECT_NE(verdict_headline(lucky.d, 50, 5).find("No effect found: force error"), std::string::npos)
+      << verdict_headline(lucky.d, 50, 5);
   // A lower share asked of a verdict keeps it.
   ResampledCase kept = resampled_case({true, false, false});
   DiagnoseOptions lenient = options;

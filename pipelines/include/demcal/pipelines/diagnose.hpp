@@ -550,8 +550,10 @@ Diagnosis::VerdictFrequency verdict_frequency(const Diagnosis& diagnosis, const 
                                               const DiagnoseOptions& options, std::uint64_t seed);
 
 // The verdict when its choice holds in fewer than options.verdict_share of the resamples
-// (diagnosis.frequency): undecided, every choice with its share named; a tie stays as it is. True
-// when the verdict changed.
+// (diagnosis.frequency): "no effect" when at least that share of them choose no effect (needed, or
+// found where the base misses by more than kUnexplainedRatio x the floor; the share becomes the
+// verdict's); else undecided, every choice with its share named. A tie stays as it is. True when
+// the verdict changed.
 bool settle_on_frequency(Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // Step 5b, after select_effect: the candidates whose search goes on (DiagnoseOptions::
