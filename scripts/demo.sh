@@ -24,7 +24,7 @@ python3 -c 'import json,sys; r=json.load(open(sys.argv[1])); print(json.dumps({"
 
 echo
 echo "diagnosing data/refdem-arch/A-support-1.csv (another code's record, effect not declared) ..."
-"$build/demcal" diagnose data/refdem-arch/A-campaign.json --out "$diag" --quiet --candidates 2 \
+"$build/demcal" diagnose data/refdem-arch/A-campaign.json --out "$diag" --quiet --candidates 2 --close-target-share 1 \
   --continued-simulations 0 --no-parameter-bounds --max-effects 1 > "$diag.log"
 python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); t=d["timing"]; print("verdict:", d["headline"]); print("force error %.0f N -> %.0f N, %d simulations, %.0f s (simulations %.0f s, model %.0f s)" % (d["error_before"], d["error_after"], d["simulations"], t["wall_s"], t["simulations_s"], t["model_s"]))' "$diag/diagnosis.json"
 echo "report: $diag/report.md"
