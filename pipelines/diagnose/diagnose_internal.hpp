@@ -183,6 +183,8 @@ std::vector<double> score_candidates(Diagnosis& d);
 const EffectCandidate* chosen_candidate(const Diagnosis& d);
 // The diagnosis's error floor (error_floor of its base noise and scatter), N.
 double floor_of(const Diagnosis& d, const DiagnoseOptions& options);
+// "RMS force error E N, noise about N N, simulation scatter about S N" of the base fit.
+std::string base_errors_text(const Diagnosis& d);
 // The chosen effect when its fit misses the curves by more than the explained level; else null.
 const EffectCandidate* unexplained_chosen(const Diagnosis& d, const DiagnoseOptions& options);
 

@@ -140,13 +140,11 @@ bool settle_on_frequency(Diagnosis& d, const DiagnoseOptions& options) {
       }
     d.chosen.clear();
     d.error_after = d.error_before;
-    const double noise = overall_noise(d.base_residuals), scatter = overall(d.scatter);
-    const bool unexplained = d.error_before > kUnexplainedRatio * error_floor(noise, scatter, options);
+    const bool unexplained = d.error_before > kUnexplainedRatio * floor_of(d, options);
     d.outcome = unexplained ? DiagnosisOutcome::unexplained : DiagnosisOutcome::no_effect_needed;
     d.verdict = std::string(unexplained ? "No effect found" : "No effect needed") + ": the fits' median runs point to " +
                 choice + ", but " + taken_again + " finds no effect in " + percent(f.none) + " of them (" + listed +
-                "); RMS force error " + format_number(d.error_before, 3) + " N, noise about " + format_number(noise, 3) +
-                " N, simulation scatter about " + format_number(scatter, 3) + " N" +
+                "); " + base_errors_text(d) +
                 (unexplained ? ", so the model lacks something the effects tried do not supply." : ".");
     d.frequency.verdict = f.none;
     return true;

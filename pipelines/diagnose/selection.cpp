@@ -47,6 +47,12 @@ double floor_of(const Diagnosis& d, const DiagnoseOptions& options) {
   return error_floor(overall_noise(d.base_residuals), overall(d.scatter), options);
 }
 
+std::string base_errors_text(const Diagnosis& d) {
+  return "RMS force error " + format_number(d.error_before, 3) + " N, noise about " +
+         format_number(overall_noise(d.base_residuals), 3) + " N, simulation scatter about " +
+         format_number(overall(d.scatter), 3) + " N";
+}
+
 const EffectCandidate* chosen_candidate(const Diagnosis& d) {
   if (d.chosen.empty()) return nullptr;
   for (const auto& c : d.candidates)
@@ -170,14 +176,12 @@ bool tied_with_a_rival(Diagnosis& d, EffectCandidate* passing, const std::vector
 
 // The verdict where no candidate passes: "no effect found" when the base fit misses the curves by
 // far more than the noise (the model lacks something, which "no effect needed" would hide).
-void no_effect_verdict(Diagnosis& d, const std::vector<EffectCandidate*>& short_of_criterion, double noise,
+void no_effect_verdict(Diagnosis& d, const std::vector<EffectCandidate*>& short_of_criterion,
                        const DiagnoseOptions& options) {
   d.chosen.clear();
   d.error_after = d.error_before;
-  const double scatter = overall(d.scatter);
-  const double floor = error_floor(noise, scatter, options);
-  const std::string errors = "RMS force error " + format_number(d.error_before, 3) + " N, noise about " +
-                             format_number(noise, 3) + " N, simulation scatter about " + format_number(scatter, 3) + " N";
+  const double floor = floor_of(d, options);
+  const std::string errors = base_errors_text(d);
   const EffectCandidate* closest = nullptr;
   for (const auto* c : short_of_criterion)
     if (closest == nullptr || c->error < closest->error) closest = c;
@@ -240,7 +244,7 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
                 " explain the residual equally well. Another test (a further channel, or a test of the same structure) "
                 "is needed to choose; the model is not extended.";
   } else {
-    no_effect_verdict(d, short_of_criterion, noise, options);
+    no_effect_verdict(d, short_of_criterion, options);
   }
 }
 

@@ -214,10 +214,11 @@ class BayesOptimiser final : public optimise::Optimiser {
     return !model_.usable() || rows_now >= surrogate_.refit_growth * static_cast<double>(warm_.size() + last_full);
   }
 
-  // The model for the round after this one, fitted on `rows` on another thread while this round's
-  // points are simulated (overlap_). Recorded in fits_ as requested, so that a replay, which takes
+  // The model for the round after this one (if any), fitted on `rows` on another thread while this
+  // round's `count` points are simulated (overlap_). Recorded in fits_ as requested, so that a replay, which takes
   // the same update-or-refit path, ends with the same model.
-  void start_next_fit(const std::vector<TrainingRow>& rows) {
+  void start_next_fit(const std::vector<TrainingRow>& rows, long count) {
+    if (!overlap_ || options_.evaluation_budget() - evaluations_ - count <= 0) return;  // no round after this one
     const bool full = full_refit_due();
     fits_.push_back({static_cast<long>(told_x_.size()), full});
     next_model_ = std::async(std::launch::async, [this, model = model_, rows, full]() mutable {
@@ -233,18 +234,14 @@ class BayesOptimiser final : public optimise::Optimiser {
   // replayed last fit of a restored optimiser), else a fit now. The points told since its rows are
   // returned in `unseen`.
   bool model_for_round(const std::vector<TrainingRow>& rows, std::vector<Eigen::VectorXd>& unseen) {
-    bool usable;
     if (next_model_.valid()) {
       model_ = next_model_.get();
-      usable = model_.usable();
-    } else if (prefitted_) {
-      usable = model_.usable();
-    } else {
-      usable = refresh_model(rows);
+    } else if (!prefitted_) {
+      refresh_model(rows);
     }
     prefitted_ = false;
     for (size_t i = static_cast<size_t>(fits_.back().first); i < told_x_.size(); ++i) unseen.push_back(told_x_[i]);
-    return usable;
+    return model_.usable();
   }
 
   // The model's score of every point, on `threads` threads (each score on its own: the same
@@ -274,7 +271,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     const auto rows = rows_until(told_x_.size());
     std::vector<Eigen::VectorXd> unseen;
     if (!model_for_round(rows, unseen)) {
-      if (overlap_ && another_round_after(count)) start_next_fit(rows);
+      start_next_fit(rows, count);
       for (long i = 0; i < count; ++i) {
         if (i > 0)
           for (int k = 0; k < d; ++k) random_point[k] = uniform01(rng);
@@ -338,10 +335,9 @@ class BayesOptimiser final : public optimise::Optimiser {
       pending_predictions_.push_back({{"fitness", p.fitness}, {"low90", lo}, {"high90", hi}});
     }
     adapt_batch(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-    if (overlap_ && another_round_after(count)) start_next_fit(rows);
+    start_next_fit(rows, count);
   }
 
-  bool another_round_after(long count) const { return options_.evaluation_budget() - evaluations_ - count > 0; }
 
   // Cost-aware rounds, decided once, after the third proposal round (a full fit and two updates,
   // as later rounds mix them): when a round's mean model time exceeds cost_ratio x the wall time of
