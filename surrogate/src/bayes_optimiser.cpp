@@ -338,7 +338,6 @@ class BayesOptimiser final : public optimise::Optimiser {
     start_next_fit(rows, count);
   }
 
-
   // Cost-aware rounds, decided once, after the third proposal round (a full fit and two updates,
   // as later rounds mix them): when a round's mean model time exceeds cost_ratio x the wall time of
   // a round of simulations (one simulation per worker, hooks_.seconds_per_simulation), later
