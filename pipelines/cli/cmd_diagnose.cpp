@@ -17,7 +17,7 @@ struct DiagnoseFlags {
   std::string campaign_file;
   std::string effects = "all";
   std::string held_out;
-  bool no_report = false, quiet = false, no_bounds = false;
+  bool no_report = false, quiet = false, no_bounds = false, no_removal_check = false;
 };
 
 // Names separated by commas, each trimmed of spaces; "all" or "" = none (every effect, for
@@ -43,6 +43,7 @@ void run(const DiagnoseFlags& f) {
   o.held_out = split_names(f.held_out, "--held-out");
   o.report = !f.no_report;
   o.parameter_bounds = !f.no_bounds;
+  o.removal_check = !f.no_removal_check;
   o.progress = !f.quiet;
   const Diagnosis d = run_diagnosis(config, o);
   std::cout << d.headline << "\n  - " << d.conclusion << "\n";
@@ -108,6 +109,8 @@ void setup(CLI::App& app) {
   sub->add_option("--profile-simulations", o.profile_simulations,
                   "Runs per re-fit of the other parameters at a value the bounds' check rules out (0 = no re-fit)")
       ->capture_default_str();
+  sub->add_flag("--no-removal-check", flags->no_removal_check,
+                "Skip the removal check: each effect added re-fitted without (the base alone for one), and dropped when that costs no evidence");
   sub->add_option("--max-effects", o.max_effects,
                   "Effects added at most: after one is accepted the model with it is diagnosed again, until none passes (0 = no limit)")
       ->capture_default_str();

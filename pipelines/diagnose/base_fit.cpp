@@ -38,6 +38,7 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
   base.archive = diagnosis_archive(options);
   base.report = options.report;
   base.surrogate.options.cost_ratio = HUGE_VAL;  // as every search of the diagnosis (extended_campaign)
+  base.surrogate.options.overlap = "always";
   if (options.max_simulations > 0)
     base.optimiser.max_evaluations = std::min(base.optimiser.evaluation_budget(), options.max_simulations / 2);
   progress(options, "base calibration (" + std::to_string(base.optimiser.evaluation_budget()) + " simulations) in " +

@@ -238,6 +238,10 @@ json Diagnosis::to_json() const {
     added_json.push_back({{"effect", a.effect}, {"target", a.target}, {"parameters", a.parameters},
                           {"error_before", finite_or_null(a.error_before)}, {"error_after", finite_or_null(a.error_after)},
                           {"frequency", finite_or_null(a.frequency)}, {"folder", a.folder}});
+  json removals = json::array();
+  for (const auto& r : removal_checks)
+    removals.push_back({{"effect", r.effect}, {"criterion", finite_or_null(r.criterion)},
+                        {"error_without", finite_or_null(r.error_without)}, {"folder", r.folder}, {"dropped", r.dropped}});
   json points = json::object();
   for (const auto& [key, n] : effective_points)
     points[key] = {{"points", n}, {"from", effective_points_from.at(key)}};
@@ -251,6 +255,7 @@ json Diagnosis::to_json() const {
           {"chosen", chosen},
           {"outcome", to_string(outcome)},
           {"added", added_json},
+          {"removal_checks", removals},
           {"headline", headline},
           {"conclusion", conclusion},
           {"notes", notes},

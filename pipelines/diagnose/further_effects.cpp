@@ -52,6 +52,143 @@ std::unique_ptr<DiagnosisRun> next_step(const DiagnosisRun& run, const std::vect
   return next;
 }
 
+// An effect of the model with several: its registry entry, targets and the structure's scales its
+// ranges were resolved with (those of the step that added it), and its fit.
+struct ModelEffect {
+  const dem::Effect* effect = nullptr;
+  std::vector<std::string> targets;
+  dem::ResponseScales scales;
+  const EffectCandidate* fit = nullptr;
+};
+
+ModelEffect model_effect(const Diagnosis& step) {
+  const EffectCandidate* c = chosen_candidate(step);
+  ModelEffect e;
+  e.effect = &dem::find_effect(c->effect);
+  if (!c->target.empty()) e.targets = {c->target};
+  e.scales.peak_normal_stress = std::isfinite(step.peak_normal_stress) ? step.peak_normal_stress : 0;
+  e.scales.start_normal_stress = std::isfinite(step.start_normal_stress) ? step.start_normal_stress : 0;
+  e.fit = c;
+  return e;
+}
+
+// The base model of `run` with `effects` switched on in order (none: the base alone), calibrated
+// from `full` (the complete set of the model with every effect: the start, and the caps) into
+// `folder`, its fit judged on the grid of `with_all`. The fit's fields as calibrate_candidate sets
+// them (its complete set into `best_set`); reason set where it failed.
+EffectCandidate fit_with(DiagnosisRun& run, const std::vector<ModelEffect>& effects,
+                         const std::map<std::string, double>& full, const std::vector<ChannelResidual>& with_all,
+                         const fs::path& folder, std::map<std::string, double>& best_set) {
+  CampaignConfig config = run.config;
+  for (std::size_t i = 0; i + 1 < effects.size(); ++i) {
+    const ExtendedModel m = extend(config, *effects[i].effect, effects[i].targets, effects[i].scales,
+                                   folder / ("model-" + std::to_string(i + 1)));
+    CampaignConfig next = m.config;
+    next.space = extended_space(m, config, full, run.options);
+    config = std::move(next);
+  }
+  ExtendedModel m;
+  m.config = config;
+  if (!effects.empty()) {
+    const ModelEffect& last = effects.back();
+    m = extend(config, *last.effect, last.targets, last.scales, folder / "model");
+  }
+  EffectCandidate c;
+  c.effect = effects.empty() ? "" : effects.back().effect->name;
+  c.target = m.target;
+  c.tried = true;
+  const long budget = run.within_budget(run.per_candidate);
+  if (budget < 2 * run.config.optimiser.population) {
+    c.reason = "over the simulation budget";
+    return c;
+  }
+  try {
+    calibrate_candidate(c, best_set, m, config, full, run.options, budget, folder, full, with_all, run.runner);
+  } catch (const std::exception& ex) {
+    c.reason = std::string("its calibration failed: ") + ex.what();
+  }
+  return c;
+}
+
+// "effect at target: parameters" of each effect of `effects` at the values of `params`.
+std::string effects_text(const std::vector<ModelEffect>& effects, const std::map<std::string, double>& params,
+                         const Diagnosis& base) {
+  std::string text;
+  for (const auto& e : effects) {
+    EffectCandidate c;
+    c.effect = e.effect->name;
+    c.params = params;
+    text += (text.empty() ? "" : "; ") + c.effect + (e.targets.empty() ? "" : " at " + e.targets.front()) + ": " +
+            fitted_effect_parameters(c, base);
+  }
+  return text;
+}
+
+// The removal check of the effects added (Diagnosis::removal_checks): each left out in turn, the
+// model with the others (the first alone: the base) calibrated again from the fit with all of them;
+// the one whose removal costs least is dropped when it costs no evidence, and the verdict says so
+// with the error without it. One pass: a dropped effect's partners are not checked again.
+void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& steps) {
+  Diagnosis& d = run.d;
+  std::vector<ModelEffect> effects;
+  for (const auto* step : steps) effects.push_back(model_effect(step->d));
+  const DiagnosisRun& last = *steps.back();
+  const std::vector<ChannelResidual>& with_all = effects.back().fit->residuals;
+  const auto& full = last.best_sets.at(effects.back().fit->effect);
+  std::vector<EffectCandidate> without;
+  std::vector<std::map<std::string, double>> sets(effects.size());
+  std::vector<std::vector<ChannelResidual>> residuals;
+  std::vector<int> parameters;
+  for (std::size_t i = 0; i < effects.size(); ++i) {
+    std::vector<ModelEffect> others = effects;
+    others.erase(others.begin() + static_cast<std::ptrdiff_t>(i));
+    const fs::path folder = fs::path(run.options.out) / ("without-" + effects[i].effect->name);
+    progress(run.options, "removal check: the model without " + effects[i].effect->name + " calibrated in " + folder.string());
+    without.push_back(fit_with(run, others, full, with_all, folder, sets[i]));
+    residuals.push_back(std::isfinite(without.back().error) ? without.back().residuals : std::vector<ChannelResidual>{});
+    parameters.push_back(effects[i].fit->effect_parameters);
+    d.removal_checks.push_back({effects[i].effect->name, Diagnosis::kNaN, without.back().error, folder.string(), false});
+  }
+  int drop = -1;
+  const std::vector<double> criteria = removal_criteria(with_all, residuals, parameters, run.options.evidence, drop);
+  for (std::size_t i = 0; i < criteria.size(); ++i) d.removal_checks[i].criterion = criteria[i];
+  if (drop < 0) {
+    std::string costs;
+    for (std::size_t i = 0; i < criteria.size(); ++i)
+      costs += (costs.empty() ? "" : ", ") + effects[i].effect->name + " " + format_number(-criteria[i], 3);
+    add_note(d, " Each effect still pays for its parameters: removing one raises the criterion by " + costs + ".");
+    return;
+  }
+  const auto k = static_cast<std::size_t>(drop);
+  Diagnosis::RemovalCheck& dropped = d.removal_checks[k];
+  dropped.dropped = true;
+  std::erase(d.chosen, dropped.effect);
+  std::vector<ModelEffect> kept = effects;
+  kept.erase(kept.begin() + drop);
+  std::string errors = format_number(d.error_before, 3);
+  for (const auto& a : d.added) errors += " → " + format_number(a.error_after, 3);
+  d.error_after = without[k].error;
+  const std::string why = dropped.effect + " dropped again (its removal costs no evidence: criterion " +
+                          format_number(criteria[k], 3) + ")";
+  const std::string against = " N against " + format_number(run.noise, 3) + " N of noise.";
+  if (kept.empty()) {
+    // the base alone, re-fitted from the effect's fit, does as well: what the effect gained was
+    // the base parameters' search, not the effect
+    d.outcome = d.error_after > 2 * floor_of(d, run.options) ? DiagnosisOutcome::unexplained
+                                                             : DiagnosisOutcome::no_effect_needed;
+    d.headline = std::string(d.outcome == DiagnosisOutcome::unexplained ? "No effect found" : "No effect needed") +
+                 ": the base model re-fitted from the " + dropped.effect + " fit reaches " +
+                 format_number(d.error_after, 3) + " N, so " + why + "; force error " + errors + " → " +
+                 format_number(d.error_after, 3) + against;
+  } else {
+    d.headline = std::string(kept.size() == 1 ? "Missing: " : "Missing " + std::to_string(kept.size()) + " effects: ") +
+                 effects_text(kept, sets[k], run.d) + "; force error " + errors + " → " +
+                 format_number(d.error_after, 3) + " N with " + why + "," + against.substr(1);
+  }
+  add_note(d, " Removal check: " + why + "; the model without it, in " + dropped.folder + ", fits to " +
+                  format_number(d.error_after, 3) + " N.");
+}
+
 }  // namespace
 
 void add_further_effects(DiagnosisRun& run) {
@@ -88,6 +225,8 @@ void add_further_effects(DiagnosisRun& run) {
     last = next.get();
     steps.push_back(std::move(next));
   }
+  std::vector<const DiagnosisRun*> chain = {&run};
+  for (const auto& step : steps) chain.push_back(step.get());
   if (d.added.size() > 1) {
     std::string effects, errors = format_number(d.error_before, 3), shares;
     for (const auto& a : d.added) {
@@ -99,6 +238,7 @@ void add_further_effects(DiagnosisRun& run) {
                  " N against " + format_number(run.noise, 3) + " N of noise" +
                  (shares.empty() ? "" : "; each step's choice reached by " + shares + " of its resamples") + ".";
   }
+  if (run.options.removal_check) check_removals(run, chain);
 }
 
 }  // namespace demcal::pipelines::detail

@@ -249,6 +249,27 @@ std::vector<double> common_effective_points(const std::vector<const std::vector<
   return points;
 }
 
+std::vector<double> removal_criteria(const std::vector<ChannelResidual>& with_all,
+                                     const std::vector<std::vector<ChannelResidual>>& without,
+                                     const std::vector<int>& parameters, double evidence, int& drop) {
+  if (parameters.size() != without.size())
+    throw std::invalid_argument("removal criteria: " + std::to_string(without.size()) + " fits without an effect, " +
+                                std::to_string(parameters.size()) + " parameter counts");
+  std::vector<const std::vector<ChannelResidual>*> fits = {&with_all};
+  for (const auto& w : without)
+    if (w.size() == with_all.size()) fits.push_back(&w);
+  const std::vector<double> points = common_effective_points(fits);
+  std::vector<double> criteria;
+  drop = -1;
+  for (std::size_t i = 0; i < without.size(); ++i) {
+    const bool fitted = without[i].size() == with_all.size() && !with_all.empty();
+    criteria.push_back(fitted ? information_criterion_change(without[i], with_all, parameters[i], points) : Diagnosis::kNaN);
+    if (std::isfinite(criteria[i]) && criteria[i] > -evidence && (drop < 0 || criteria[i] > criteria[static_cast<std::size_t>(drop)]))
+      drop = static_cast<int>(i);
+  }
+  return criteria;
+}
+
 double signature_score(const std::vector<double>& residual, const std::vector<std::vector<double>>& base_sensitivities,
                        const std::vector<std::vector<double>>& signatures) {
   const auto n = static_cast<Eigen::Index>(residual.size());

@@ -9,7 +9,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <future>
+#include <functional>
+#include <optional>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -47,6 +48,52 @@ double negative_penalised(unsigned n, const double* x, double*, void* data) {
   return -(*static_cast<const PenalisedScore*>(data))(Eigen::Map<const Eigen::VectorXd>(x, n));
 }
 
+// The next round's model, fitted on a thread of its own while this round's points are simulated.
+// The thread is joined, not only waited for: a thread that trained keeps running after its result is
+// ready, while LibTorch and OpenMP free its per-thread state, and the next training must not begin
+// before that ends (a diagnosis whose every search overlapped crashed once in about 600 such fits
+// with std::async, which returns the result before its thread has ended).
+class BackgroundFit {
+ public:
+  BackgroundFit() = default;
+  BackgroundFit(const BackgroundFit&) = delete;
+  BackgroundFit& operator=(const BackgroundFit&) = delete;
+  ~BackgroundFit() { wait(); }
+
+  void start(std::function<SurrogateModel()> fit) {
+    discard();
+    thread_ = std::thread([this, fit = std::move(fit)] {
+      try {
+        result_ = fit();
+      } catch (...) {
+        error_ = std::current_exception();
+      }
+    });
+  }
+  bool running() const { return thread_.joinable(); }
+  void wait() {
+    if (thread_.joinable()) thread_.join();
+  }
+  void discard() {
+    wait();
+    result_.reset();
+    error_ = nullptr;
+  }
+  // The fitted model (the thread joined first); rethrows what the fit threw.
+  SurrogateModel take() {
+    wait();
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+    SurrogateModel model = std::move(*result_);
+    result_.reset();
+    return model;
+  }
+
+ private:
+  std::thread thread_;
+  std::optional<SurrogateModel> result_;
+  std::exception_ptr error_;
+};
+
 class BayesOptimiser final : public optimise::Optimiser {
  public:
   BayesOptimiser(const optimise::ParameterSpace& space, const optimise::OptimiserOptions& options,
@@ -54,6 +101,7 @@ class BayesOptimiser final : public optimise::Optimiser {
       : Optimiser(space, options, "bo"), surrogate_(std::move(surrogate)), warm_(std::move(warm)), hooks_(std::move(hooks)) {
     surrogate_.Validate();
     batch_ = std::max(1, surrogate_.batch);
+    overlap_ = surrogate_.overlap == "always";
     const int d = space.dimension();
     for (const auto& r : warm_)
       if (r.unit.size() != d) throw std::invalid_argument("bo: a warm row has the wrong dimension");
@@ -132,7 +180,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     s["batch"] = batch_;
     s["batch_reason"] = batch_reason_;
     s["overlap"] = overlap_;
-    s["prefitted"] = prefitted_ || next_model_.valid();
+    s["prefitted"] = prefitted_ || next_model_.running();
     return s;
   }
 
@@ -163,8 +211,7 @@ class BayesOptimiser final : public optimise::Optimiser {
       throw std::invalid_argument("bo state: told_x, told_f and told_predictions differ in length");
     if (pending_predictions_.size() != pending_units_.size())
       throw std::invalid_argument("bo state: pending_units and pending_predictions differ in length");
-    if (next_model_.valid()) next_model_.wait();
-    next_model_ = {};
+    next_model_.discard();
     model_ = SurrogateModel();
     replayed_ = false;
   }
@@ -221,7 +268,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     if (!overlap_ || options_.evaluation_budget() - evaluations_ - count <= 0) return;  // no round after this one
     const bool full = full_refit_due();
     fits_.push_back({static_cast<long>(told_x_.size()), full});
-    next_model_ = std::async(std::launch::async, [this, model = model_, rows, full]() mutable {
+    next_model_.start([this, model = model_, rows, full]() mutable {
       if (full || !model.update(rows)) {
         model = SurrogateModel(surrogate_, hooks_);
         model.fit(rows);
@@ -234,8 +281,8 @@ class BayesOptimiser final : public optimise::Optimiser {
   // replayed last fit of a restored optimiser), else a fit now. The points told since its rows are
   // returned in `unseen`.
   bool model_for_round(const std::vector<TrainingRow>& rows, std::vector<Eigen::VectorXd>& unseen) {
-    if (next_model_.valid()) {
-      model_ = next_model_.get();
+    if (next_model_.running()) {
+      model_ = next_model_.take();
     } else if (!prefitted_) {
       refresh_model(rows);
     }
@@ -353,7 +400,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     if (!(simulation > 0)) return;
     const double ratio = model_seconds / (surrogate_.cost_ratio * simulation);
     const int factor = static_cast<int>(std::clamp(std::ceil(ratio), 1.0, static_cast<double>(kMaxBatchFactor)));
-    overlap_ = factor == 1;
+    overlap_ = factor == 1 || surrogate_.overlap == "always";
     batch_reason_ = (factor > 1 ? "batches of " + std::to_string(batch_ * factor)
                                 : std::string("batches kept, the model fitted while the simulations run")) +
                     ": a proposal round took " + format_number(model_seconds, 3) + " s of model time, a simulation " +
@@ -381,7 +428,7 @@ class BayesOptimiser final : public optimise::Optimiser {
   bool prefitted_ = false;  // restored: the replayed last fit is the next round's model
   bool replayed_ = true;
   SurrogateModel model_;
-  std::future<SurrogateModel> next_model_;  // the overlapping fit; last, so destroyed (waited for) first
+  BackgroundFit next_model_;  // the overlapping fit; last, so destroyed (joined) first
 };
 
 }  // namespace

@@ -33,6 +33,8 @@ void SurrogateOptions::Validate() const {
     throw std::invalid_argument("surrogate refit_growth = " + format_number(refit_growth, round_trip_digits) +
                                 " must be finite and >= 1");
   if (threads < 1) throw std::invalid_argument("surrogate threads = " + std::to_string(threads) + " must be >= 1");
+  if (overlap != "auto" && overlap != "always")
+    throw std::invalid_argument("surrogate overlap = '" + overlap + "' (expected auto or always)");
   if (!(cost_ratio > 0))
     throw std::invalid_argument("surrogate cost_ratio = " + format_number(cost_ratio, round_trip_digits) +
                                 " must be > 0 (infinity: never adapt)");
@@ -68,6 +70,7 @@ const FieldTable<SurrogateOptions>& surrogate_fields() {
           [](const SurrogateOptions& o) -> std::optional<nlohmann::json> {
             return std::isfinite(o.cost_ratio) ? nlohmann::json(o.cost_ratio) : nlohmann::json("inf");
           }),
+      field("overlap", &SurrogateOptions::overlap),
       custom_field<SurrogateOptions>(
           "gp",
           [](SurrogateOptions& o, const nlohmann::json& value, const std::string& where) {

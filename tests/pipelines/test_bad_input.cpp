@@ -154,6 +154,8 @@ const std::vector<Entry>& catalogue() {
        {"campaign.json", "surrogate.mlp", "members = 1", ">= 2"}},
       {"campaign_surrogate_unknown_kind", campaign_edit([](json& c, const fs::path&) { c["surrogate"] = {{"kind", "forest"}}; }),
        {"campaign.json", "surrogate", "forest", "gp or mlp"}},
+      {"campaign_surrogate_unknown_overlap", campaign_edit([](json& c, const fs::path&) { c["surrogate"] = {{"overlap", "often"}}; }),
+       {"campaign.json", "surrogate", "overlap = 'often'", "auto or always"}},
       {"campaign_command_without_output",
        campaign_edit([](json& c, const fs::path&) { c["backend"]["command"] = "sim {k} {friction_deg}"; }),
        {"campaign.json", "backend.command", "{output}"}},

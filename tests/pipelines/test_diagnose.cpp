@@ -147,14 +147,21 @@ TEST(Evidence, InformationCriterionRewardsStructureAndPenalisesParameters) {
   EXPECT_GT(information_criterion_change({almost}, {right}, 2), 0);
 }
 
+namespace {
+
+// A fitted channel known only by its RMS error, noise 20 N and `points` effective points.
+ChannelResidual channel_of(double rms, double points) {
+  ChannelResidual c;
+  c.rms = rms;
+  c.noise = 20;
+  c.effective_points = points;
+  return c;
+}
+
+}  // namespace
+
 TEST(Evidence, AChannelWithinItsNoiseIsNeitherForNorAgainst) {
-  auto channel = [](double rms) {
-    ChannelResidual c;
-    c.rms = rms;
-    c.noise = 20;
-    c.effective_points = 4;
-    return c;
-  };
+  auto channel = [](double rms) { return channel_of(rms, 4); };
   // inside the noise on both sides (a rigid support's gauge, say): no change at all
   EXPECT_EQ(information_criterion_change({channel(4)}, {channel(15)}, 0), 0);
   EXPECT_EQ(information_criterion_change({channel(15)}, {channel(4)}, 0), 0);
@@ -166,13 +173,7 @@ TEST(Evidence, AChannelWithinItsNoiseIsNeitherForNorAgainst) {
 }
 
 TEST(Evidence, EveryFitIsCountedWithTheEffectivePointsOfTheClosestFit) {
-  auto channel = [](double rms, double points) {
-    ChannelResidual c;
-    c.rms = rms;
-    c.noise = 20;
-    c.effective_points = points;
-    return c;
-  };
+  const auto channel = channel_of;
   // a base fit, a candidate that leaves a rough residual (many points) and one that fits closer
   // with a smoother residual; on the second channel the rough one is the closest
   const std::vector<ChannelResidual> base = {channel(800, 3), channel(100, 5)};
@@ -193,6 +194,34 @@ TEST(Evidence, EveryFitIsCountedWithTheEffectivePointsOfTheClosestFit) {
   EXPECT_DOUBLE_EQ(information_criterion_change(base, closer, 2, points),
                    10 * std::log(240.0 * 240 / (800 * 800)) + 60 * std::log(50.0 * 50 / (100 * 100)) + 2 * std::log(70.0));
   EXPECT_THROW(information_criterion_change(base, closer, 2, {10}), std::invalid_argument);
+}
+
+// The removal check of a model with two effects: an effect whose removal leaves the fit where it
+// was no longer pays for its parameters and is the one dropped; one whose removal costs the fit is
+// kept; a fit that failed keeps its effect.
+TEST(Evidence, AnEffectWhoseRemovalCostsNoEvidenceIsDropped) {
+  auto fit = [](double rms) { return std::vector<ChannelResidual>{channel_of(rms, 12)}; };
+  const auto with_all = fit(30);
+  int drop = -2;
+  // without the first: 31 N (nearly the same fit); without the second: 200 N
+  auto criteria = removal_criteria(with_all, {fit(31), fit(200)}, {1, 3}, 10, drop);
+  ASSERT_EQ(criteria.size(), 2u);
+  EXPECT_DOUBLE_EQ(criteria[0], information_criterion_change(fit(31), with_all, 1, {12}));
+  EXPECT_GT(criteria[0], -10);
+  EXPECT_LT(criteria[1], -10);
+  EXPECT_EQ(drop, 0);
+  // both still pay: none dropped
+  criteria = removal_criteria(with_all, {fit(150), fit(200)}, {1, 3}, 10, drop);
+  EXPECT_EQ(drop, -1);
+  // both redundant: the one whose removal costs least
+  criteria = removal_criteria(with_all, {fit(33), fit(30.5)}, {1, 1}, 10, drop);
+  EXPECT_GT(criteria[1], criteria[0]);
+  EXPECT_EQ(drop, 1);
+  // a failed fit without an effect: that effect is kept, its criterion unknown
+  criteria = removal_criteria(with_all, {{}, fit(200)}, {1, 3}, 10, drop);
+  EXPECT_TRUE(std::isnan(criteria[0]));
+  EXPECT_EQ(drop, -1);
+  EXPECT_THROW(removal_criteria(with_all, {fit(31)}, {1, 2}, 10, drop), std::invalid_argument);
 }
 
 TEST(Evidence, SignatureScoreNeedsTheRightShapeAndSign) {
@@ -1312,7 +1341,9 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
 
 // After an effect is accepted the model with it is the next base: the diagnosis runs again in
 // DIR/with-<effect>/, from the first fit, with the other effect as the only candidate, and reports
-// the step (a second effect added, or a note that none passed there).
+// the step (a second effect added, or a note that none passed there). Each effect added is
+// checked for removal: the model without it calibrated in DIR/without-<effect>/, and one whose
+// removal costs no evidence is dropped from the verdict.
 TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   const fs::path dir = test_support::fresh_dir("diagnose", "steps");
   const json j = small_search_campaign(dir, "steps");
@@ -1329,8 +1360,10 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "steps.json"), o);
   const json written = test_support::read_json(dir / "out" / "diagnosis.json");
   ASSERT_TRUE(written["added"].is_array());
-  EXPECT_EQ(written["added"].size(), d.chosen.size());
-  EXPECT_EQ(d.added.size(), d.chosen.size());
+  EXPECT_EQ(written["added"].size(), d.added.size());
+  const auto dropped = std::count_if(d.removal_checks.begin(), d.removal_checks.end(),
+                                     [](const Diagnosis::RemovalCheck& r) { return r.dropped; });
+  EXPECT_EQ(d.added.size(), d.chosen.size() + static_cast<std::size_t>(dropped));
   if (d.outcome != DiagnosisOutcome::missing_effect) {
     EXPECT_TRUE(d.added.empty()) << d.verdict;
     for (const auto& e : o.effects) EXPECT_FALSE(fs::exists(dir / "out" / ("with-" + e)));
@@ -1348,10 +1381,25 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   ASSERT_EQ(next["candidates"].size(), 1u);
   EXPECT_NE(next["candidates"][0]["effect"], first);
   EXPECT_GT(d.simulations, next["simulations"].get<long>());
+  ASSERT_EQ(d.removal_checks.size(), d.added.size());
+  ASSERT_EQ(written["removal_checks"].size(), d.added.size());
+  for (std::size_t i = 0; i < d.added.size(); ++i) {
+    EXPECT_EQ(d.removal_checks[i].effect, d.added[i].effect);
+    EXPECT_TRUE(fs::exists(dir / "out" / ("without-" + d.added[i].effect) / "result.json")) << d.added[i].effect;
+  }
   if (d.added.size() == 2) {
     EXPECT_EQ(d.added[1].folder, step.string());
-    EXPECT_EQ(d.error_after, d.added[1].error_after);
-    EXPECT_EQ(d.headline.rfind("Missing 2 effects: ", 0), 0u) << d.headline;
+    if (dropped == 0) {
+      EXPECT_EQ(d.error_after, d.added[1].error_after);
+      EXPECT_EQ(d.headline.rfind("Missing 2 effects: ", 0), 0u) << d.headline;
+    } else {
+      EXPECT_EQ(dropped, 1);
+      const auto& r = *std::find_if(d.removal_checks.begin(), d.removal_checks.end(),
+                                    [](const Diagnosis::RemovalCheck& x) { return x.dropped; });
+      EXPECT_GT(r.criterion, -o.evidence);
+      EXPECT_EQ(d.error_after, r.error_without);
+      EXPECT_NE(d.headline.find(r.effect + " dropped again"), std::string::npos) << d.headline;
+    }
   } else {
     EXPECT_EQ(d.added.size(), 1u);
     EXPECT_NE(d.verdict.find("With " + first + " added, the diagnosis ran again"), std::string::npos) << d.verdict;

@@ -62,6 +62,7 @@ TEST_P(RefdemRecord, TheControlNeedsNoEffect) {
   EXPECT_EQ(d.outcome, DiagnosisOutcome::no_effect_needed) << d.verdict;
   EXPECT_TRUE(d.chosen.empty()) << d.verdict;
   EXPECT_EQ(d.error_after, d.error_before);
+  EXPECT_TRUE(d.removal_checks.empty());
   for (const auto& c : d.candidates) EXPECT_NE(c.verdict, CandidateVerdict::accepted) << c.effect;
   EXPECT_NE(d.headline.find("No effect needed: force error"), std::string::npos) << d.headline;
   EXPECT_LT(d.error_before, 2 * (d.noise.begin()->second));  // the two codes agree to about the noise
@@ -69,12 +70,13 @@ TEST_P(RefdemRecord, TheControlNeedsNoEffect) {
 }
 
 // The other code's right abutment on a 2 MN/m horizontal spring (kn 3.4e9, ks 1.3e9, friction 31.5°),
-// with a joint gap on offer too (the rival whose fit comes closest): both effects probed, ranked, calibrated through the
-// campaign machinery into the diagnosis's one archive, re-simulated on the base grid, judged and
-// reported; support compliance is named at the right abutment (not the left), its horizontal
-// stiffness within a factor 2 of the truth and inside what its bounds do not rule out, the error
-// lowered, and the choice reached by most resamples. (The base friction is not compared with the
-// other code's: the two codes' friction laws differ, and the fits end at 40-45°.)
+// with a joint gap on offer too (the rival whose fit comes closest): both effects probed, ranked,
+// calibrated through the campaign machinery into the diagnosis's one archive, re-simulated on the
+// base grid, judged and reported; support compliance is named at the right abutment (not the
+// left), its horizontal stiffness within a factor 2 of the truth and inside what its bounds do not
+// rule out, the error lowered, the choice reached by most resamples, and the base re-fitted from
+// its fit without it clearly worse (the removal check). (The base friction is not compared with
+// the other code's: the two codes' friction laws differ, and the fits end at 40-45°.)
 TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   const fs::path dir = test_support::fresh_dir("diagnose", "refdem-support-" + GetParam().name());
   constexpr double kx_truth = 2e6;
@@ -100,6 +102,14 @@ TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   EXPECT_LT(d.error_after, d.error_before);
   EXPECT_EQ(d.frequency.resamples, DiagnoseOptions{}.resamples);
   EXPECT_GE(d.frequency.verdict, DiagnoseOptions{}.verdict_share);
+  // the removal check: the base alone, re-fitted from the support's fit, misses by far more
+  ASSERT_EQ(d.removal_checks.size(), 1u);
+  const Diagnosis::RemovalCheck& removal = d.removal_checks.front();
+  EXPECT_EQ(removal.effect, "support-compliance");
+  EXPECT_FALSE(removal.dropped);
+  EXPECT_LT(removal.criterion, -DiagnoseOptions{}.evidence);
+  EXPECT_GT(removal.error_without, d.error_after);
+  EXPECT_TRUE(fs::exists(dir / "out" / "without-support-compliance" / "result.json"));
   // each of the effect's parameters checked, the truth inside what the check does not rule out
   ASSERT_EQ(c->bounds.size(), 3u);
   for (const ParameterBound& b : c->bounds) {

@@ -218,6 +218,31 @@ CurveHooks curve_hooks() {
   return hooks;
 }
 
+// A "bo" run of overlapping rounds on the curve family, the best after each round; at round
+// `stop_after` its state is saved (with the overlap decided and the next round's fit in flight) and
+// a fresh optimiser continues from it. The finished state's summary into `summary`, if given.
+std::vector<double> overlapping_rounds(const SurrogateOptions& s, const CurveHooks& hooks, int stop_after,
+                                       BayesSummary* summary = nullptr) {
+  const auto space = unit_square();
+  const auto o = bayes_options(26, 4);
+  auto opt = make_bayes_optimiser(space, o, s, {}, hooks);
+  std::vector<double> history;
+  int round = 0;
+  while (!opt->done()) {
+    if (round++ == stop_after) {
+      const nlohmann::json state = nlohmann::json::parse(opt->save_state().dump());
+      EXPECT_TRUE(state.at("overlap").get<bool>()) << "saved after the decision";
+      EXPECT_TRUE(state.at("prefitted").get<bool>()) << "saved with the next round's fit started";
+      opt = make_bayes_optimiser(space, o, s, {}, hooks);
+      opt->load_state(state);
+    }
+    simulate_round(*opt, space);
+    history.push_back(opt->best_value());
+  }
+  if (summary) *summary = summarise_bayes_state(opt->save_state());
+  return history;
+}
+
 }  // namespace
 
 // "bo" with the mlp kind: the optimiser is told fitness values only and finds each told point's
@@ -301,34 +326,33 @@ TEST(BayesOptimiser, ProposesDistinctBatchesAndResumesAfterUpdatesExactly) {
 // rounds that wait for their model, and a run resumed after overlapping rounds (a fit in flight
 // when the state was saved) ends with the uninterrupted history.
 TEST(BayesOptimiser, SlowSimulationsOverlapTheFitsAndResumeExactly) {
-  const auto space = unit_square();
-  const auto o = bayes_options(26, 4);
   const SurrogateOptions s = batched_mlp(2);
   const CurveHooks hooks = curve_hooks();
-  auto run = [&](const CurveHooks& h, int stop_after, std::string* reason) {
-    auto opt = make_bayes_optimiser(space, o, s, {}, h);
-    std::vector<double> history;
-    int round = 0;
-    while (!opt->done()) {
-      if (round++ == stop_after) {
-        const nlohmann::json state = nlohmann::json::parse(opt->save_state().dump());
-        EXPECT_TRUE(state.at("overlap").get<bool>()) << "saved after the decision";
-        EXPECT_TRUE(state.at("prefitted").get<bool>()) << "saved with the next round's fit started";
-        opt = make_bayes_optimiser(space, o, s, {}, h);
-        opt->load_state(state);
-      }
-      simulate_round(*opt, space);
-      history.push_back(opt->best_value());
-    }
-    if (reason) *reason = summarise_bayes_state(opt->save_state()).batch_reason;
-    return history;
-  };
   CurveHooks slow = hooks;
   slow.seconds_per_simulation = [] { return 1000.0; };
-  std::string reason;
-  const auto overlapped = run(slow, -1, &reason);
-  EXPECT_NE(reason.find("batches kept, the model fitted while the simulations run"), std::string::npos) << reason;
+  BayesSummary summary;
+  const auto overlapped = overlapping_rounds(s, slow, -1, &summary);
+  EXPECT_NE(summary.batch_reason.find("batches kept, the model fitted while the simulations run"), std::string::npos)
+      << summary.batch_reason;
   EXPECT_LT(overlapped.back(), overlapped.front() / 10) << "design best " << overlapped.front();
-  EXPECT_NE(run(hooks, -1, nullptr), overlapped) << "the rounds waiting for their model propose otherwise";
-  EXPECT_EQ(run(slow, 6, nullptr), overlapped);
+  EXPECT_NE(overlapping_rounds(s, hooks, -1), overlapped) << "the rounds waiting for their model propose otherwise";
+  EXPECT_EQ(overlapping_rounds(s, slow, 6), overlapped);
+}
+
+// overlap "always" (the diagnosis's searches): no clock is read, every round after the first
+// model proposes with the model fitted while the round before ran, from the first model on; the
+// same history on every run, resumed or not, and it still reaches the basin.
+TEST(BayesOptimiser, AlwaysOverlappingRoundsNeedNoClockAndResumeExactly) {
+  SurrogateOptions s = batched_mlp(2);
+  s.cost_ratio = HUGE_VAL;
+  s.overlap = "always";
+  const CurveHooks hooks = curve_hooks();  // no seconds_per_simulation
+  BayesSummary summary;
+  const auto overlapped = overlapping_rounds(s, hooks, -1, &summary);
+  EXPECT_EQ(summary.batch, 2) << "the batch never grows";
+  EXPECT_LT(overlapped.back(), overlapped.front() / 10) << "design best " << overlapped.front();
+  EXPECT_EQ(overlapping_rounds(s, hooks, -1), overlapped);
+  EXPECT_EQ(overlapping_rounds(s, hooks, 3), overlapped) << "resumed after the first overlapping round";
+  s.overlap = "auto";
+  EXPECT_NE(overlapping_rounds(s, hooks, -1), overlapped) << "without a clock, auto rounds wait for their model";
 }

@@ -27,7 +27,10 @@
 //                    `tie_margin` of each other are "tied", and then none is chosen;
 //   6. bounds        for an accepted or tied effect, how tightly the data pin each of its
 //                    parameters (ParameterBound: the fit re-run with that parameter moved, the
-//                    others re-fitted where needed).
+//                    others re-fitted where needed);
+//   7. more effects  the model with the accepted effect is the next base (max_effects); then each
+//                    effect added is re-fitted without (the base alone for one: removal_criteria)
+//                    and dropped where its removal costs no evidence.
 //
 // Outputs: <out>/diagnosis.json (layout in docs/commands/diagnose.md) and <out>/report.md with residual
 // plots before and after, the table of candidates and the verdict in words. Forces in N,
@@ -128,6 +131,17 @@ double lag1_autocorrelation(const std::vector<double>& values);
 double information_criterion_change(const std::vector<ChannelResidual>& base,
                                     const std::vector<ChannelResidual>& extended, int extra_parameters,
                                     const std::vector<double>& effective_points = {});
+
+// The removal check of a model with several effects: for each effect i, `without[i]` is the fit of
+// the model with the other effects, calibrated again without it (empty where that fit failed), and
+// `parameters[i]` its parameter count. Returns each effect's criterion change from `without[i]` to
+// `with_all` (information_criterion_change, every fit counted with the common_effective_points of
+// them all; NaN for an empty fit, an effect that is then kept), and sets `drop` to the effect whose
+// removal costs least when its change does not fall by more than `evidence` (it no longer pays for
+// its parameters), else -1.
+std::vector<double> removal_criteria(const std::vector<ChannelResidual>& with_all,
+                                     const std::vector<std::vector<ChannelResidual>>& without,
+                                     const std::vector<int>& parameters, double evidence, int& drop);
 
 // The effective points per channel with which the criterion counts every fit of one diagnosis: on
 // each channel, those of the fit with the lowest RMS error there among `fits` (each a set of
@@ -279,6 +293,10 @@ struct DiagnoseOptions {
   // tied effect (ParameterBound): four runs per parameter, and for each value they rule out a
   // re-fit of the others of at most `profile_simulations` runs (--profile-simulations; 0 = none).
   bool parameter_bounds = true;
+  // --no-removal-check sets false: once the loop stops, each effect added is calibrated again
+  // without (the model with the others; the base alone for one, `candidate_simulations` runs each)
+  // and dropped when its removal costs no evidence (Diagnosis::removal_checks).
+  bool removal_check = true;
   int profile_simulations = 20;
   // --continued-simulations: a further search (ContinuedSearch) of each fit left above the floor
   // where the selection leaves the residual unexplained: the accepted effect, then, while no fit
@@ -411,6 +429,17 @@ struct Diagnosis {
     double frequency = kNaN;       // its step's VerdictFrequency::verdict
   };
   std::vector<AddedEffect> added;
+  // Once several effects are added, each one's removal check (removal_criteria): the model with the
+  // others re-calibrated without it, and the criterion change from that fit to the model with all.
+  // An effect whose removal costs no evidence is dropped again (`dropped`), left out of `chosen`.
+  struct RemovalCheck {
+    std::string effect;
+    double criterion = kNaN;      // negative: the effect still pays for its parameters; NaN: no fit
+    double error_without = kNaN;  // N, the fit without it
+    std::string folder;           // its calibration
+    bool dropped = false;
+  };
+  std::vector<RemovalCheck> removal_checks;
   DiagnosisOutcome outcome = DiagnosisOutcome::no_effect_needed;
   // The verdict three ways: `headline`, one sentence a person reads first ("Missing:
   // support-compliance at abutment_right: support_kx ≈ 1.83 MN/m (1.2–3.1 MN/m); force error 232 ->

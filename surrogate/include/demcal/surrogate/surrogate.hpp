@@ -118,6 +118,12 @@ struct SurrogateOptions {
   // "bo": when a round's model time exceeds cost_ratio x its simulations' wall time, the batch grows
   // (up to 2 x) so that fewer rounds share the simulations; infinity ("inf") = never. > 0.
   double cost_ratio = 1.0;
+  // "bo": when the next round's model is fitted. "auto": the cost rule above decides (the model
+  // fits while the simulations run where a round's model time is below cost_ratio x its
+  // simulations'; it measures time, so the choice can differ with the machine's load). "always":
+  // from the first model on, every round proposes with the model fitted while the round before it
+  // was simulated, its points penalised as the round's own: the same choices on any machine.
+  std::string overlap = "auto";
   // Threads that score the acquisition's candidate points ("bo"). Not part of the options' JSON:
   // results do not depend on it. (Training stays on one thread: LibTorch's matrix products call a
   // BLAS that may not be safe to call from two threads at once, and results then differed run to run.)
