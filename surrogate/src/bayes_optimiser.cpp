@@ -49,10 +49,11 @@ double negative_penalised(unsigned n, const double* x, double*, void* data) {
 }
 
 // The next round's model, fitted on a thread of its own while this round's points are simulated.
-// The thread is joined, not only waited for: a thread that trained keeps running after its result is
-// ready, while LibTorch and OpenMP free its per-thread state, and the next training must not begin
-// before that ends (a diagnosis whose every search overlapped crashed once in about 600 such fits
-// with std::async, which returns the result before its thread has ended).
+// The thread is joined, not only waited for: a thread that trained runs on after its result is
+// ready, while LibTorch and OpenMP free its per-thread state, and the next training should not
+// begin before that ends. With std::async, which hands the result over before its thread has
+// ended, a diagnosis whose every search overlapped crashed once in about 600 such fits; with the
+// thread joined the crash has not been seen again (docs/journal/diagnose-studies.md).
 class BackgroundFit {
  public:
   BackgroundFit() = default;
@@ -70,7 +71,7 @@ class BackgroundFit {
       }
     });
   }
-  bool running() const { return thread_.joinable(); }
+  bool pending() const { return thread_.joinable(); }  // started and not taken
   void wait() {
     if (thread_.joinable()) thread_.join();
   }
@@ -180,7 +181,7 @@ class BayesOptimiser final : public optimise::Optimiser {
     s["batch"] = batch_;
     s["batch_reason"] = batch_reason_;
     s["overlap"] = overlap_;
-    s["prefitted"] = prefitted_ || next_model_.running();
+    s["prefitted"] = prefitted_ || next_model_.pending();
     return s;
   }
 
@@ -281,7 +282,7 @@ class BayesOptimiser final : public optimise::Optimiser {
   // replayed last fit of a restored optimiser), else a fit now. The points told since its rows are
   // returned in `unseen`.
   bool model_for_round(const std::vector<TrainingRow>& rows, std::vector<Eigen::VectorXd>& unseen) {
-    if (next_model_.running()) {
+    if (next_model_.pending()) {
       model_ = next_model_.take();
     } else if (!prefitted_) {
       refresh_model(rows);

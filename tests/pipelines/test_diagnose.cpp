@@ -1235,13 +1235,15 @@ Truth compliant_right_abutment(double kx) {
 // Cohesion and tensile strength of `pascal` at every joint present at the start (a brittle bond).
 Truth bonded_joints(double pascal) { return {"cohesion", {}, {{"cohesion", pascal}, {"tensile_strength", pascal}}}; }
 
-// The loop with two candidate effects: the hidden one and a decoy.
+// The loop with two candidate effects: the hidden one and a decoy (the removal check, asserted on
+// another code's record in test_diagnose_refdem.cpp, left out for time).
 Diagnosis diagnose(const Truth& truth, const fs::path& dir, const std::vector<std::string>& effects,
                    const Realisation& realisation = {}) {
   const fs::path measured = make_measurement(truth, dir, 1, loop_arch(), realisation);
   DiagnoseOptions o;
   o.out = (dir / "out").string();
   o.effects = effects;
+  o.removal_check = false;
   o.candidate_simulations = 60;
   o.progress = false;
   return run_diagnosis(campaign(measured, dir, realisation), o);
@@ -1745,11 +1747,14 @@ TEST(DiagnoseLoop, AFitLeftAboveTheFloorIsSearchedFurther) {
   const json j = fast_campaign("continued", measured, {{{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}},
                                {{"kn", 2.6e9}, {"ks", 0.9e9}});
   std::ofstream(dir / "campaign.json") << j.dump(2);
+  // The parts count the runs each further search adds; the removal check, whose re-fit starts from
+  // whichever fit a part ends with, would add its own, so it is left out here.
   const auto diagnose = [&](const std::string& options, const std::string& continued) {
     const std::string command = std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() +
                                 " --out " + (dir / "diag").string() +
-                                " --quiet --no-report --no-parameter-bounds --candidate-simulations 24 --evidence 1"
-                                " --resume " + options + " --continued-simulations " + continued + " > /dev/null 2>&1";
+                                " --quiet --no-report --no-parameter-bounds --no-removal-check --candidate-simulations 24"
+                                " --evidence 1 --resume " + options + " --continued-simulations " + continued +
+                                " > /dev/null 2>&1";
     EXPECT_EQ(std::system(command.c_str()), 0) << command;
     return test_support::read_json(dir / "diag" / "diagnosis.json");
   };
