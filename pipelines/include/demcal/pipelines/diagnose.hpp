@@ -132,13 +132,13 @@ double information_criterion_change(const std::vector<ChannelResidual>& base,
                                     const std::vector<ChannelResidual>& extended, int extra_parameters,
                                     const std::vector<double>& effective_points = {});
 
-// The removal check of a model with several effects: for each effect i, `without[i]` is the fit of
-// the model with the other effects, calibrated again without it (empty where that fit failed), and
-// `parameters[i]` its parameter count. Returns each effect's criterion change from `without[i]` to
-// `with_all` (information_criterion_change, every fit counted with the common_effective_points of
-// them all; NaN for an empty fit, an effect that is then kept), and sets `drop` to the effect whose
-// removal costs least when its change does not fall by more than `evidence` (it no longer pays for
-// its parameters), else -1.
+// The removal check of the effects added to a model: for each effect i, `without[i]` is the fit of
+// the model with the other effects (none: the base), calibrated again without it (empty where that
+// fit failed), and `parameters[i]` its parameter count. Returns each effect's criterion change from
+// `without[i]` to `with_all` (information_criterion_change, every fit counted with the
+// common_effective_points of them all; NaN for an empty fit, an effect that is then kept), and sets
+// `drop` to the effect whose removal costs least when its change does not fall by more than
+// `evidence` (it no longer pays for its parameters), else -1.
 std::vector<double> removal_criteria(const std::vector<ChannelResidual>& with_all,
                                      const std::vector<std::vector<ChannelResidual>>& without,
                                      const std::vector<int>& parameters, double evidence, int& drop);
@@ -293,11 +293,11 @@ struct DiagnoseOptions {
   // tied effect (ParameterBound): four runs per parameter, and for each value they rule out a
   // re-fit of the others of at most `profile_simulations` runs (--profile-simulations; 0 = none).
   bool parameter_bounds = true;
+  int profile_simulations = 20;
   // --no-removal-check sets false: once the loop stops, each effect added is calibrated again
   // without (the model with the others; the base alone for one, `candidate_simulations` runs each)
   // and dropped when its removal costs no evidence (Diagnosis::removal_checks).
   bool removal_check = true;
-  int profile_simulations = 20;
   // --continued-simulations: a further search (ContinuedSearch) of each fit left above the floor
   // where the selection leaves the residual unexplained: the accepted effect, then, while no fit
   // explains the curves, the contenders. -1: a candidate's budget; 0: none.
@@ -429,9 +429,10 @@ struct Diagnosis {
     double frequency = kNaN;       // its step's VerdictFrequency::verdict
   };
   std::vector<AddedEffect> added;
-  // Once several effects are added, each one's removal check (removal_criteria): the model with the
-  // others re-calibrated without it, and the criterion change from that fit to the model with all.
-  // An effect whose removal costs no evidence is dropped again (`dropped`), left out of `chosen`.
+  // Each effect added, its removal check (removal_criteria): the model with the others (the base
+  // alone for one) re-calibrated without it, and the criterion change from that fit to the model
+  // with all. An effect whose removal costs no evidence is dropped again (`dropped`), left out of
+  // `chosen`.
   struct RemovalCheck {
     std::string effect;
     double criterion = kNaN;      // negative: the effect still pays for its parameters; NaN: no fit
