@@ -134,12 +134,16 @@ def judged(record, d):
             "wall_s": d["timing"]["wall_s"], "right": bool(right), "within_noise": bool(declared and within_noise)}
 
 
+def verdict_of(row):
+    return ", ".join(row["chosen"]) if row["chosen"] else row["outcome"].replace("_", " ")
+
+
 def markdown(rows):
     out = ["| record | declared | verdict | resamples reaching it | effect parameters (range) vs truth | "
            "error before → after (noise), N | simulations | wall (s) | right |",
            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
-        verdict = ", ".join(r["chosen"]) if r["chosen"] else r["outcome"].replace("_", " ")
+        verdict = verdict_of(r)
         params = "; ".join(
             "%s %s (%s–%s) vs %s%s" % (p["name"].split(".")[-1], number(p["value"]),
                                        "·" if p["lower"] is None else number(p["lower"]),
@@ -156,10 +160,6 @@ def markdown(rows):
     out.append("")
     out.append("%d of %d right." % (right, len(rows)))
     return "\n".join(out)
-
-
-def verdict_of(row):
-    return ", ".join(row["chosen"]) if row["chosen"] else row["outcome"].replace("_", " ")
 
 
 def realisation_markdown(realisations, rows_by_record):

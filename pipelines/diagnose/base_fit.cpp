@@ -37,8 +37,7 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
   base.output = (fs::path(options.out) / "base").string();
   base.archive = diagnosis_archive(options);
   base.report = options.report;
-  base.surrogate.options.cost_ratio = HUGE_VAL;  // as every search of the diagnosis (extended_campaign)
-  base.surrogate.options.overlap = "always";
+  fix_search_rounds(base);
   if (options.max_simulations > 0)
     base.optimiser.max_evaluations = std::min(base.optimiser.evaluation_budget(), options.max_simulations / 2);
   progress(options, "base calibration (" + std::to_string(base.optimiser.evaluation_budget()) + " simulations) in " +

@@ -130,6 +130,14 @@ CampaignConfig fitted_cases(CampaignConfig config, const DiagnoseOptions& option
 
 // ---- extended models (extension.cpp) -----------------------------------------------------------
 
+// Every search of a diagnosis ("bo"): rounds of one point per worker, never grown by the cost rule,
+// each round's model fitted while the round before it is simulated, whatever the machine's speed.
+// A search here is short (tens of simulations in up to six dimensions), where fewer rounds cost
+// accuracy (measured: the compliant-support loop test missed the soft support with rounds grown
+// to 4 points, found it with 2), and a verdict must not depend on how busy the machine was
+// (docs/diagnose.md, step 4).
+void fix_search_rounds(CampaignConfig& c);
+
 struct ExtendedModel {
   CampaignConfig config;
   std::vector<std::string> parameter_names;                   // set_parameter names of the effect

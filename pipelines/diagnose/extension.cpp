@@ -54,6 +54,11 @@ std::vector<double> candidate_start(const optimise::ParameterSpace& space, const
 
 namespace detail {
 
+void fix_search_rounds(CampaignConfig& c) {
+  c.surrogate.options.cost_ratio = HUGE_VAL;
+  c.surrogate.options.overlap = "always";
+}
+
 ExtendedModel extend(const CampaignConfig& config, const dem::Effect& effect, const std::vector<std::string>& targets,
                      const dem::ResponseScales& scales, const fs::path& folder) {
   ExtendedModel m;
@@ -147,13 +152,7 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
   c.optimiser.max_evaluations = evaluations;
   c.optimiser.algorithm = options.candidate_algorithm;
   c.surrogate.options.kind = options.surrogate_kind;
-  // Rounds of one point per worker, never grown by the cost rule: a candidate's search is short
-  // (tens of simulations in up to six dimensions), where fewer rounds cost accuracy (measured: the
-  // compliant-support loop test missed the soft support with rounds grown to 4 points, found it
-  // with 2), and a verdict must not depend on how busy the machine was. Each round's model fits
-  // while the round before it is simulated, on every machine alike (docs/diagnose.md, step 4).
-  c.surrogate.options.cost_ratio = HUGE_VAL;
-  c.surrogate.options.overlap = "always";
+  fix_search_rounds(c);
   // The diagnosis bounds an effect's parameters itself (stage 6): no identifiability profile here.
   c.identifiability_profile.enabled = false;
   const bool local = options.candidate_algorithm.rfind("nlopt:", 0) == 0;

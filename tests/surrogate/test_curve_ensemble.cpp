@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <random>
 
 using namespace demcal::surrogate;
@@ -218,11 +219,14 @@ CurveHooks curve_hooks() {
   return hooks;
 }
 
-// A "bo" run of overlapping rounds on the curve family, the best after each round; at round
-// `stop_after` its state is saved (with the overlap decided and the next round's fit in flight) and
-// a fresh optimiser continues from it. The finished state's summary into `summary`, if given.
-std::vector<double> overlapping_rounds(const SurrogateOptions& s, const CurveHooks& hooks, int stop_after,
-                                       BayesSummary* summary = nullptr) {
+// A "bo" run on the curve family (unit square, 26 simulations), the best after each round; at round
+// `stop_after` its state is saved, checked by `check_saved`, and a fresh optimiser continues from
+// it. `check_batch` sees each round's points (rounds from 1) with the evaluations before them; the
+// finished state goes into `last`, if given.
+std::vector<double> resumed_rounds(const SurrogateOptions& s, const CurveHooks& hooks, int stop_after,
+                                   const std::function<void(const nlohmann::json&)>& check_saved,
+                                   const std::function<void(int, const std::vector<Eigen::VectorXd>&, long)>& check_batch = {},
+                                   nlohmann::json* last = nullptr) {
   const auto space = unit_square();
   const auto o = bayes_options(26, 4);
   auto opt = make_bayes_optimiser(space, o, s, {}, hooks);
@@ -231,15 +235,34 @@ std::vector<double> overlapping_rounds(const SurrogateOptions& s, const CurveHoo
   while (!opt->done()) {
     if (round++ == stop_after) {
       const nlohmann::json state = nlohmann::json::parse(opt->save_state().dump());
-      EXPECT_TRUE(state.at("overlap").get<bool>()) << "saved after the decision";
-      EXPECT_TRUE(state.at("prefitted").get<bool>()) << "saved with the next round's fit started";
+      check_saved(state);
       opt = make_bayes_optimiser(space, o, s, {}, hooks);
       opt->load_state(state);
     }
-    simulate_round(*opt, space);
+    const auto batch = opt->ask();
+    if (check_batch) check_batch(round, batch, opt->evaluations());
+    std::vector<double> values;
+    for (const auto& x : batch) values.push_back(fitness_of(curve(space.to_unit(x))));
+    opt->tell(values);
     history.push_back(opt->best_value());
   }
-  if (summary) *summary = summarise_bayes_state(opt->save_state());
+  if (last) *last = opt->save_state();
+  return history;
+}
+
+// Overlapping rounds: the state is saved with the overlap decided and the next round's fit in
+// flight; the finished state's summary into `summary`, if given.
+std::vector<double> overlapping_rounds(const SurrogateOptions& s, const CurveHooks& hooks, int stop_after,
+                                       BayesSummary* summary = nullptr) {
+  nlohmann::json last;
+  const auto history = resumed_rounds(
+      s, hooks, stop_after,
+      [](const nlohmann::json& state) {
+        EXPECT_TRUE(state.at("overlap").get<bool>()) << "saved after the decision";
+        EXPECT_TRUE(state.at("prefitted").get<bool>()) << "saved with the next round's fit started";
+      },
+      {}, &last);
+  if (summary) *summary = summarise_bayes_state(last);
   return history;
 }
 
@@ -281,33 +304,19 @@ TEST(BayesOptimiser, MlpKindFindsTheBasinAndResumesExactly) {
 // distinct, the model is updated between full refits, and a resumed run (state saved after
 // updates) replays the refits and ends with the uninterrupted run's history.
 TEST(BayesOptimiser, ProposesDistinctBatchesAndResumesAfterUpdatesExactly) {
-  const auto space = unit_square();
-  const auto o = bayes_options(26, 4);
   const SurrogateOptions s = batched_mlp(3);
-  const CurveHooks hooks = curve_hooks();
+  const auto check_saved = [](const nlohmann::json& state) {
+    EXPECT_GE(state.at("fits").size(), 3u) << "saved after a full fit and updates";
+  };
+  const auto check_batch = [](int round, const std::vector<Eigen::VectorXd>& batch, long evaluations) {
+    if (round <= 1) return;
+    EXPECT_EQ(batch.size(), std::min<size_t>(3, static_cast<size_t>(26 - evaluations)));
+    for (size_t i = 0; i < batch.size(); ++i)
+      for (size_t j = 0; j < i; ++j) EXPECT_GT((batch[i] - batch[j]).norm(), 1e-3) << "round " << round;
+  };
   auto run = [&](int stop_after) {
-    auto opt = make_bayes_optimiser(space, o, s, {}, hooks);
-    std::vector<double> history;
-    int round = 0;
-    while (!opt->done()) {
-      if (round++ == stop_after) {
-        const nlohmann::json state = nlohmann::json::parse(opt->save_state().dump());
-        EXPECT_GE(state.at("fits").size(), 3u) << "saved after a full fit and updates";
-        opt = make_bayes_optimiser(space, o, s, {}, hooks);
-        opt->load_state(state);
-      }
-      const auto batch = opt->ask();
-      if (round > 1) {
-        EXPECT_EQ(batch.size(), std::min<size_t>(3, static_cast<size_t>(26 - opt->evaluations())));
-        for (size_t i = 0; i < batch.size(); ++i)
-          for (size_t j = 0; j < i; ++j) EXPECT_GT((batch[i] - batch[j]).norm(), 1e-3) << "round " << round;
-      }
-      std::vector<double> values;
-      for (const auto& x : batch) values.push_back(fitness_of(curve(space.to_unit(x))));
-      opt->tell(values);
-      history.push_back(opt->best_value());
-    }
-    const nlohmann::json state = opt->save_state();
+    nlohmann::json state;
+    const auto history = resumed_rounds(s, curve_hooks(), stop_after, check_saved, check_batch, &state);
     long full = 0, updates = 0;
     for (const auto& fit : state.at("fits")) (fit.at(1).get<bool>() ? full : updates) += 1;
     EXPECT_GE(full, 1);
