@@ -470,6 +470,24 @@ std::int64_t RunArchive::max_run_id() const {
   return s.integer(0);
 }
 
+namespace {
+
+// The rows of a query selecting (runs.id, runs.param_key, runs.status[, fitness]).
+std::vector<RunFitness> run_fitness_rows(Statement& s, bool with_fitness) {
+  std::vector<RunFitness> out;
+  while (s.step()) {
+    RunFitness r;
+    r.run_id = s.integer(0);
+    r.params = params_from_key(s.text(1));
+    r.status = s.text(2);
+    if (with_fitness) r.fitness = s.real(3);
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+}  // namespace
+
 std::vector<RunFitness> RunArchive::run_fitness(const std::string& model_hash, const std::string& objective_key,
                                                 std::int64_t max_run_id) const {
   Statement s(db_, path_,
@@ -479,16 +497,17 @@ std::vector<RunFitness> RunArchive::run_fitness(const std::string& model_hash, c
   s.bind(1, model_hash);
   s.bind(2, objective_key);
   s.bind(3, max_run_id);
-  std::vector<RunFitness> out;
-  while (s.step()) {
-    RunFitness r;
-    r.run_id = s.integer(0);
-    r.params = params_from_key(s.text(1));
-    r.status = s.text(2);
-    r.fitness = s.real(3);
-    out.push_back(std::move(r));
-  }
-  return out;
+  return run_fitness_rows(s, true);
+}
+
+std::vector<RunFitness> RunArchive::unscored_runs(const std::string& model_hash, const std::string& objective_key) const {
+  Statement s(db_, path_,
+              "SELECT runs.id, runs.param_key, runs.status FROM runs WHERE runs.model_hash=? AND runs.status<>'cancelled'"
+              " AND NOT EXISTS (SELECT 1 FROM fitness WHERE fitness.run_id = runs.id AND fitness.objective_key=?)"
+              " ORDER BY runs.id");
+  s.bind(1, model_hash);
+  s.bind(2, objective_key);
+  return run_fitness_rows(s, false);
 }
 
 std::vector<RunArchive::ModelObjective> RunArchive::model_objectives() const {

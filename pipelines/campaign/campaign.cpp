@@ -98,6 +98,26 @@ struct SurrogateSetup {
   std::shared_ptr<Clock> clock = std::make_shared<Clock>();
 };
 
+// Earlier runs of the campaign's scenes that have no fitness for its objective (a calibration of the
+// same model against another measurement) and are points of its space: scored now, so that a
+// surrogate trains on every run it can use. Only where a surrogate reads earlier runs.
+void score_earlier_runs(const CampaignConfig& config, const PreparedCases& prepared, const EvaluationBackend& backend,
+                        RunArchive& archive) {
+  if (config.optimiser.algorithm != "bo" && !config.surrogate.enabled) return;
+  std::vector<std::pair<std::int64_t, size_t>> unscored;  // (run id, case)
+  for (size_t k = 0; k < config.cases.size(); ++k)
+    for (const auto& r : archive.unscored_runs(backend.model_hash(k), prepared.objective_keys[k]))
+      if (outside_space(config.space, r.params).empty()) unscored.push_back({r.run_id, k});
+  if (unscored.empty()) return;
+  FitnessWorkers workers(config.backend.fitness_threads > 0 ? config.backend.fitness_threads : hardware_threads(),
+                         prepared, config);
+  for (const auto& [id, k] : unscored) {
+    auto run = archive.run(id);
+    workers.submit(id, run->status, std::move(run->curves), k);
+  }
+  for (const auto& record : workers.finish()) archive.put_fitness(record);
+}
+
 SurrogateSetup prepare_surrogate(const CampaignConfig& config, const PreparedCases& prepared,
                                  const EvaluationBackend& backend, const RunArchive& archive,
                                  const std::optional<CampaignRecord>& previous) {
@@ -717,6 +737,7 @@ CampaignResult run_campaign(const CampaignConfig& config, const RunOptions& opti
   const auto backend = make_backend(config, prepared, options);
   RunArchive archive(archive_path(config));
   const CampaignLookup lookup = look_up_campaign(config, options, archive);
+  score_earlier_runs(config, prepared, *backend, archive);
   const SurrogateSetup surrogate = prepare_surrogate(config, prepared, *backend, archive, lookup.previous);
   CampaignOptimisers optimisers(config, surrogate, archive);
   const CampaignStart start = start_or_resume(config, options, archive, lookup, surrogate, optimisers);

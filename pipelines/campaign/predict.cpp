@@ -35,6 +35,13 @@ std::pair<double, double> peak_in_window(const smoothing::XYSeries& s, double lo
   return {peak, at};
 }
 
+// Displacement of the first row (in time) inside [lower, upper] whose force reaches `level`; NaN when none does.
+double first_reaching(const smoothing::XYSeries& s, double level, double lower, double upper) {
+  for (std::size_t i = 0; i < s.x.size(); ++i)
+    if (s.x[i] >= lower && s.x[i] <= upper && s.y[i] >= level) return s.x[i];
+  return CasePrediction::kNaN;
+}
+
 void compare(const smoothing::Curve& measured, CasePrediction& p, const smoothing::ObjectiveOptions& options) {
   const auto result = smoothing::objective1(measured, scored_curve(p.status, p.simulated, measured, options), options);
   p.fitness = result.fitness;
@@ -52,6 +59,8 @@ void compare(const smoothing::Curve& measured, CasePrediction& p, const smoothin
   std::tie(p.simulated_peak, p.simulated_peak_displacement) = peak_in_window(sim, p.window_lower, p.window_upper);
   if (std::isfinite(p.measured_peak) && p.measured_peak != 0)
     p.peak_error = (p.simulated_peak - p.measured_peak) / p.measured_peak;
+  p.measured_rise_displacement = first_reaching(exp, CasePrediction::kRise * p.measured_peak, p.window_lower, p.window_upper);
+  p.simulated_rise_displacement = first_reaching(sim, CasePrediction::kRise * p.simulated_peak, p.window_lower, p.window_upper);
 }
 
 // One run per case of the campaign's external command (its template, timeout, parallelism and
@@ -110,6 +119,8 @@ json CasePrediction::to_json() const {
           {"simulated_peak", finite_or_null(simulated_peak)},
           {"simulated_peak_displacement", finite_or_null(simulated_peak_displacement)},
           {"peak_error", finite_or_null(peak_error)},
+          {"measured_rise_displacement", finite_or_null(measured_rise_displacement)},
+          {"simulated_rise_displacement", finite_or_null(simulated_rise_displacement)},
           {"window", {finite_or_null(window_lower), finite_or_null(window_upper)}},
           {"wall_time_s", wall_time_s},
           {"engine", details.contains("peak_force")

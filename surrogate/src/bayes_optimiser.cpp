@@ -106,24 +106,35 @@ class BayesOptimiser final : public optimise::Optimiser {
     const int d = space.dimension();
     for (const auto& r : warm_)
       if (r.unit.size() != d) throw std::invalid_argument("bo: a warm row has the wrong dimension");
-    long warm_finite = 0;
-    for (const auto& r : warm_) warm_finite += std::isfinite(r.fitness) ? 1 : 0;
     const long wanted = std::max<long>(surrogate_.min_runs, options.population);
-    const long design = std::max<long>(warm_finite >= surrogate_.min_runs ? 0 : 2, wanted - warm_finite);
     // Latin hypercube: one point per stratum of every coordinate, strata permuted per coordinate.
     std::mt19937_64 rng = seeded_rng(options.seed);
-    design_ = Eigen::MatrixXd(design, d);
+    Eigen::MatrixXd lhs(wanted, d);
     for (int k = 0; k < d; ++k) {
-      std::vector<long> perm(static_cast<size_t>(design));
+      std::vector<long> perm(static_cast<size_t>(wanted));
       std::iota(perm.begin(), perm.end(), 0);
-      for (long i = design - 1; i > 0; --i) std::swap(perm[static_cast<size_t>(i)], perm[static_cast<size_t>(rng() % static_cast<std::uint64_t>(i + 1))]);
-      for (long i = 0; i < design; ++i)
-        design_(i, k) = (static_cast<double>(perm[static_cast<size_t>(i)]) + uniform01(rng)) / static_cast<double>(design);
+      for (long i = wanted - 1; i > 0; --i) std::swap(perm[static_cast<size_t>(i)], perm[static_cast<size_t>(rng() % static_cast<std::uint64_t>(i + 1))]);
+      for (long i = 0; i < wanted; ++i)
+        lhs(i, k) = (static_cast<double>(perm[static_cast<size_t>(i)]) + uniform01(rng)) / static_cast<double>(wanted);
     }
     // A given start is the design's first point: a warm start from a known good set.
-    if (!options.initial_point.empty() && design > 0)
-      design_.row(0) = space.to_unit(Eigen::Map<const Eigen::VectorXd>(options.initial_point.data(), d))
-                           .cwiseMax(0.0).cwiseMin(1.0).transpose();
+    if (!options.initial_point.empty())
+      lhs.row(0) = space.to_unit(Eigen::Map<const Eigen::VectorXd>(options.initial_point.data(), d))
+                       .cwiseMax(0.0).cwiseMin(1.0).transpose();
+    // Known runs stand in for the design points they lie near (within half the design's spacing,
+    // 0.5 n^(-1/d)), not for a count of them: runs clustered at one set (a diagnosis's probes
+    // around its base fit) leave the rest of the box to the design, an earlier campaign's spread
+    // runs replace most of it.
+    const double radius = 0.5 * std::pow(static_cast<double>(wanted), -1.0 / std::max(1, d));
+    std::vector<long> kept;
+    for (long i = 0; i < wanted; ++i) {
+      const bool covered = std::any_of(warm_.begin(), warm_.end(), [&](const TrainingRow& r) {
+        return (r.unit - lhs.row(i).transpose()).norm() <= radius;  // a failed run is known too
+      });
+      if (!covered) kept.push_back(i);
+    }
+    design_ = Eigen::MatrixXd(static_cast<Eigen::Index>(kept.size()), d);
+    for (size_t i = 0; i < kept.size(); ++i) design_.row(static_cast<Eigen::Index>(i)) = lhs.row(kept[i]);
   }
 
   std::vector<Eigen::VectorXd> ask() override {

@@ -296,6 +296,44 @@ TEST_P(SurrogateKinds, BayesRoundsFillTheWorkersAndReportTheirTime) {
   EXPECT_NE(reason.find("s of model time, a simulation"), std::string::npos) << reason;
 }
 
+// Runs archived without a fitness for a campaign's objective (scored against another measurement of
+// the same model) are scored when a "bo" campaign starts, and its model trains on them: the design
+// they replace is not simulated.
+TEST(SurrogateCampaign, EarlierRunsOfAnotherObjectiveAreScoredAndTrainTheModel) {
+  const auto dir = fresh_dir("scored-earlier");
+  json campaign = toy_campaign(dir, 3, "gp");
+  campaign["optimiser"] = {{"algorithm", "bo"}, {"population", 8}, {"max_evaluations", 20}, {"seed", 3}};
+  campaign["surrogate"] = {{"kind", "gp"}, {"min_runs", 8}, {"cost_ratio", "inf"}};
+  std::ofstream(dir / "first.json") << campaign.dump(2);
+  const std::string archive = (dir / "shared.sqlite").string();
+  const auto first = calibrate(dir / "first.json", dir / "first", false, nullptr, archive);
+  ASSERT_TRUE(first.ok()) << first.message;
+  EXPECT_EQ(read_json(dir / "first" / "result.json")["iterations"], 1 + (20 - 8) / 2) << "the design, then rounds of 2";
+
+  // Another measurement of the same wall: another objective key, the same runs.
+  ProcessOptions m;
+  m.argv = {python(), test_support::kToySimulator, "2e7", "32", (dir / "other.csv").string(), "--noise", "20", "--seed", "8"};
+  m.timeout_s = 30;
+  ASSERT_TRUE(run_process(m).ok());
+  campaign["measured"] = (dir / "other.csv").string();
+  std::ofstream(dir / "second.json") << campaign.dump(2);
+  const auto second = calibrate(dir / "second.json", dir / "second", false, nullptr, archive);
+  ASSERT_TRUE(second.ok()) << second.message;
+  const json result = read_json(dir / "second" / "result.json");
+  EXPECT_EQ(result["simulations"], 20);
+  EXPECT_EQ(result["iterations"], 20 / 2) << "no design: the first campaign's runs, scored again, replace it";
+
+  // The second objective has a fitness row for every run, the first only for its own 20.
+  RunArchive a(archive);
+  const auto pairs = a.model_objectives();  // most rows first
+  ASSERT_EQ(pairs.size(), 2u);
+  EXPECT_EQ(pairs[0].rows, a.run_count());
+  EXPECT_TRUE(a.unscored_runs(pairs[0].model_hash, pairs[0].objective_key).empty());
+  EXPECT_EQ(pairs[1].rows, 20);
+  EXPECT_EQ(static_cast<std::int64_t>(a.unscored_runs(pairs[1].model_hash, pairs[1].objective_key).size()),
+            a.run_count() - 20);
+}
+
 // kill -9 during a screened campaign, then --resume: the result is the uninterrupted one.
 TEST_P(SurrogateKinds, KilledAndResumedEndsWithTheUninterruptedResult) {
   const auto dir = fresh_dir("resume-" + GetParam());

@@ -159,6 +159,12 @@ TEST(Walls, TinyCampaignOnOneWallRunsEndToEndAndPredictReproducesItsBestFitness)
   EXPECT_LE(p.measured_peak_displacement, p.window_upper);
   EXPECT_LE(p.simulated_peak_displacement, p.window_upper);
   EXPECT_NEAR(p.peak_error, (p.simulated_peak - p.measured_peak) / p.measured_peak, 1e-12);
+  // Each curve first reaches 80 % of its peak inside the window, before (or at) the peak.
+  for (const auto& [rise, at] : {std::pair{p.measured_rise_displacement, p.measured_peak_displacement},
+                                 std::pair{p.simulated_rise_displacement, p.simulated_peak_displacement}}) {
+    EXPECT_GE(rise, p.window_lower);
+    EXPECT_LE(rise, at);
+  }
   EXPECT_TRUE(p.simulated.has_column("force"));
   const json j = prediction_json(params, cases);
   EXPECT_EQ(j["cases"][0]["name"], "SW.30.1");

@@ -153,6 +153,44 @@ TEST(BayesOptimiser, StartsItsDesignAtTheGivenPoint) {
   for (std::size_t i = 1; i < batch.size(); ++i) EXPECT_EQ(batch[i], other[i]);  // the rest is unchanged
 }
 
+// Known runs (warm rows) take the place of the design points within half the design's spacing of
+// them, 0.5 n^(-1/d): runs clustered at one set replace the points beside it only, spread runs the
+// whole design.
+TEST(BayesOptimiser, KnownRunsReplaceOnlyTheDesignPointsBesideThem) {
+  const Problem problem;
+  const auto space = space_of(problem.f);
+  optimise::OptimiserOptions o;
+  o.population = 10;
+  o.max_evaluations = 20;
+  o.seed = 2;
+  const auto design = make_bayes_optimiser(space, o, gp_kind())->ask();
+  ASSERT_EQ(design.size(), 10u);
+  auto row = [&](const Eigen::VectorXd& unit) { return TrainingRow{unit, problem(space.to_physical(unit))}; };
+  const double radius = 0.5 * std::pow(10.0, -1.0 / 3.0);
+
+  // Ten runs at (nearly) one point: the design less the points beside it.
+  const Eigen::VectorXd centre = space.to_unit(design[3]);
+  std::vector<TrainingRow> cluster;
+  for (int i = 0; i < 10; ++i) cluster.push_back(row((centre + Eigen::VectorXd::Constant(3, 1e-3 * i)).cwiseMin(1.0)));
+  std::vector<Eigen::VectorXd> expected;
+  for (const auto& x : design) {
+    const Eigen::VectorXd u = space.to_unit(x);
+    const bool beside = std::any_of(cluster.begin(), cluster.end(), [&](const TrainingRow& r) { return (r.unit - u).norm() <= radius; });
+    if (!beside) expected.push_back(x);
+  }
+  EXPECT_LT(expected.size(), design.size());
+  EXPECT_GE(expected.size(), design.size() - 3);
+  EXPECT_EQ(make_bayes_optimiser(space, o, gp_kind(), cluster)->ask(), expected);
+
+  // The design's own points as known runs: no design left, the first round is the model's.
+  std::vector<TrainingRow> spread;
+  for (const auto& x : design) spread.push_back(row(space.to_unit(x)));
+  auto warm = make_bayes_optimiser(space, o, gp_kind(), spread);
+  const auto first = warm->ask();
+  EXPECT_EQ(first.size(), 1u) << "one point per worker";
+  for (const auto& x : design) EXPECT_GT((first.front() - x).norm(), 1e-9);
+}
+
 TEST(CrossValidation, ReportsErrorAndCoverage) {
   const Problem problem;
   std::vector<TrainingRow> rows;

@@ -154,6 +154,10 @@ class RunArchive {
   // in id order. Runs without that fitness row (not yet scored) are left out.
   std::vector<RunFitness> run_fitness(const std::string& model_hash, const std::string& objective_key,
                                       std::int64_t max_run_id = INT64_MAX) const;
+  // Every run of a model (scene hash) without a fitness row for objective_key, cancelled ones left
+  // out, in id order, without the curves (run(id) reads them): runs scored for another objective,
+  // which a campaign scores for its own before its surrogate trains.
+  std::vector<RunFitness> unscored_runs(const std::string& model_hash, const std::string& objective_key) const;
   // (model hash, objective key, rows) for every pair with fitness rows, most rows first.
   struct ModelObjective {
     std::string model_hash, objective_key;

@@ -57,6 +57,11 @@ struct CasePrediction {
   double simulated_peak = kNaN;
   double simulated_peak_displacement = kNaN;
   double peak_error = kNaN;        // (simulated - measured) / measured, dimensionless
+  // The displacement (m) where each curve first reaches kRise of its peak inside the window: how
+  // early the stiffness carries the load, apart from how high the peak is.
+  static constexpr double kRise = 0.8;
+  double measured_rise_displacement = kNaN;
+  double simulated_rise_displacement = kNaN;
   double window_lower = kNaN;      // m, the shared displacement window of the first channel
   double window_upper = kNaN;
   double wall_time_s = 0;          // the simulation's wall time

@@ -239,8 +239,10 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
                                const CurveHooks& hooks = {});
 
 // "bo": Bayesian optimisation behind the ask/tell interface (see the header comment). The initial
-// design has max(options.min_runs, population) points minus the warm rows inside the space
-// (at least 2 unless the warm rows already make a usable model); then rounds of `batch` points
+// design is a Latin hypercube of max(options.min_runs, population) points, its first the given
+// initial point, less every point with a warm row within half the design's spacing of it
+// (0.5 n^(-1/d) in the unit cube): clustered warm rows replace the points beside them, spread ones
+// the whole design; then rounds of `batch` points
 // (SurrogateOptions::batch, at least 1): each point the maximum of the acquisition, locally
 // penalised around the points already in the round, over 2000 random points and 20 alternatives
 // around each of the 5 best training points, polished by NLopt LN_BOBYQA from the best 3. The model
