@@ -21,6 +21,7 @@ cases=(
   "support-compliance|--support-kx 5e6|both abutments on 5 MN/m horizontal springs"
   "joint-gap|--gap-joint voussoir_9/voussoir_10 --gap-extrados 1e-3|wedge gap at voussoir 9/10, 1 mm at the extrados"
   "boundary-restraint|--beam-kr 2e3|loaded voussoir on a 2 kN m/rad rotational spring"
+  "shear-stiffening|--shear-stiffening-stress 2e5|shear stiffness doubled at 0.2 MPa of normal stress"
 )
 
 printf "| effect | settings | status | peak (kN) | force at 12 mm (kN) | hinges |\n|---|---|---|---|---|---|\n"

@@ -7,6 +7,7 @@
 #include "effect_crushing_cap_law.hpp"
 #include "effect_friction_softening_law.hpp"
 #include "effect_joint_closure_law.hpp"
+#include "effect_shear_stiffening_law.hpp"
 
 #include "demcal/dem/scene.hpp"
 
@@ -69,17 +70,18 @@ struct NodeHistory {
 };
 
 // Mohr-Coulomb with the joint-group effects of JointMaterial, each effect's arithmetic from its
-// header beside it (effect_<name>_law.hpp): hyperbolic closure, friction softening with slip,
-// brittle cohesion and tension, and a crushing cap with softening. They are composed here, in the
-// order per node: elastic closure = penetration - plastic closure; normal force from the closure
-// law (tension allowed only while bonded); the crushing cap; the tension bond check; then the
-// shear trial against c A (bonded) + tan(phi(slip)) Fn, breaking the bond when exceeded. Direct
+// header beside it (effect_<name>_law.hpp): hyperbolic closure, shear stiffness growing with the
+// normal stress, friction softening with slip, brittle cohesion and tension, and a crushing cap
+// with softening. They are composed here, in the order per node: elastic closure = penetration -
+// plastic closure; normal force from the closure law (tension allowed only while bonded); the
+// crushing cap; the tension bond check; then the shear trial, with the stiffness at that normal
+// stress, against c A (bonded) + tan(phi(slip)) Fn, breaking the bond when exceeded. Direct
 // inline calls, as this is the engine's inner loop: the node loop (Engine::process_nodes) compiles
 // to the same instructions as with the arithmetic written here, only the members' offsets differ.
 class EffectLaw {
  public:
   explicit EffectLaw(const JointMaterial& m)
-      : ks_(m.shear_stiffness), closure_(m), softening_(m), bond_(m), cap_(m) {}
+      : ks_(m.shear_stiffness), closure_(m), stiffening_(m), softening_(m), bond_(m), cap_(m) {}
 
   bool bonds() const { return bond_.on(); }
 
@@ -107,7 +109,7 @@ class EffectLaw {
       return f;
     }
     f.normal = stress * k.area;
-    const double ks_area = ks_ * k.area;
+    const double ks_area = ks_ * stiffening_.factor(stress) * k.area;
     const double trial = shear_state - ks_area * k.shear_increment;
     const double tan_phi = softening_.tan_friction(h.slip);
     double limit = tan_phi * f.normal + (h.bonded ? bond_.cohesive_force(k.area) : 0.0);
@@ -133,6 +135,7 @@ class EffectLaw {
  private:
   double ks_;
   ClosureLaw closure_;
+  ShearStiffening stiffening_;
   FrictionSoftening softening_;
   BondLaw bond_;
   CrushingCap cap_;

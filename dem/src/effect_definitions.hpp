@@ -36,5 +36,6 @@ Effect crushing_cap();
 Effect support_compliance();
 Effect joint_gap();
 Effect boundary_restraint();
+Effect shear_stiffening();
 
 }  // namespace demcal::dem::effects

@@ -11,7 +11,7 @@ namespace {
 std::vector<Effect> build_registry() {
   return {effects::joint_closure(),      effects::friction_softening(), effects::cohesion(),
           effects::crushing_cap(),       effects::support_compliance(), effects::joint_gap(),
-          effects::boundary_restraint()};
+          effects::boundary_restraint(), effects::shear_stiffening()};
 }
 
 }  // namespace
@@ -28,9 +28,9 @@ std::string to_string(EffectTarget target) {
 
 EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScales& scales) {
   EffectParameter out = p;
-  if (p.search_scale == SearchScale::peak_normal_stress && scales.peak_normal_stress > 0 &&
-      std::isfinite(scales.peak_normal_stress)) {
-    const double start = std::isfinite(scales.start_normal_stress) ? scales.start_normal_stress : 0.0;
+  if (p.search_scale != SearchScale::absolute && scales.peak_normal_stress > 0 && std::isfinite(scales.peak_normal_stress)) {
+    const bool strength = p.search_scale == SearchScale::peak_normal_stress;
+    const double start = strength && std::isfinite(scales.start_normal_stress) ? scales.start_normal_stress : 0.0;
     out.search_max = std::clamp(p.scaled_max * scales.peak_normal_stress, p.lower_bound, p.upper_bound);
     out.search_min = std::clamp(std::max(p.scaled_min * scales.peak_normal_stress, start), p.lower_bound, p.upper_bound);
     if (!(out.search_min < out.search_max)) out.search_min = out.search_max * p.scaled_min / p.scaled_max;

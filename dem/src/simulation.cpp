@@ -415,7 +415,9 @@ double Engine::critical_time_step() const {
     // Hyperbolic closure stiffens the joint up to kClosureStiffening x kn.
     const double stiffening = g.material.closure_on() ? JointMaterial::kClosureStiffening : 1.0;
     kn = std::max(kn, stiffening * g.material.normal_stiffness);
-    ks = std::max(ks, g.material.shear_stiffness);
+    // So does shear stiffening, ks up to kShearStiffening x ks.
+    const double shear_stiffening = g.material.shear_stiffening_on() ? JointMaterial::kShearStiffening : 1.0;
+    ks = std::max(ks, shear_stiffening * g.material.shear_stiffness);
   }
   double omega_squared = 0;
   for (std::size_t i = 0; i < bodies_.size(); ++i) {

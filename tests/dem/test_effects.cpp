@@ -288,6 +288,37 @@ TEST(CrushingCap, ForceCappedAtStrengthTimesAreaThenFalling) {
   EXPECT_NEAR(p.max_normal_stress, fc, 1e-6 * fc);  // the capped stress, not the elastic trial's
 }
 
+// The joint's elastic shear stiffness in N/m: the block of block_on_base() under its weight alone
+// (normal stress W/A, 1962 Pa), pushed along its base at the joint's height so that every node
+// carries W/n, with `stress` (0: off) as the stress that doubles ks. The slope of force against
+// displacement (least squares) while the force stays between 10 and 70 % of W tan(phi), where no
+// node slides.
+double elastic_shear_stiffness(double stress) {
+  Scene s = block_on_base(30);
+  if (stress > 0) set_parameter(s, "shear_stiffening_stress", stress);
+  actuate(s, Vec2(-0.1, 0), Vec2(1, 0), 4e-7, 4e-6, 1e8);
+  const Recording r = simulate(s);
+  EXPECT_EQ(r.status, RunStatus::completed) << r.message;
+  const double limit = 2000 * kWidth * 0.02 * 9.81 * std::tan(30 * kDeg);
+  double n = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (std::size_t i = 0; i < r.force.size(); ++i) {
+    if (r.force[i] < 0.1 * limit || r.force[i] > 0.7 * limit) continue;
+    const double x = r.gauge_values[0][i], y = r.force[i];
+    n += 1, sx += x, sy += y, sxx += x * x, sxy += x * y;
+  }
+  EXPECT_GT(n, 10) << "rows in the elastic range";
+  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+
+TEST(ShearStiffening, ShearStiffnessGrowsWithTheNormalStressUpToItsCap) {
+  // ks A (1 + s / stress) with s = W/A: 4 x ks A at a third of the joint's stress; 16 x (the cap)
+  // far below it. 2 %: the least-squares slope of quasi-static loading (10 s through a soft actuator).
+  const double ks_area = 4e8 * kArea, stress = 2000 * 0.1 * 9.81;  // W/A = rho h g
+  EXPECT_NEAR(elastic_shear_stiffness(0), ks_area, 0.02 * ks_area);
+  EXPECT_NEAR(elastic_shear_stiffness(stress / 3), 4 * ks_area, 0.02 * 4 * ks_area);
+  EXPECT_NEAR(elastic_shear_stiffness(stress / 1000), 16 * ks_area, 0.02 * 16 * ks_area);
+}
+
 TEST(SupportCompliance, SupportMovesByThrustOverSpringStiffness) {
   // A block pushed by a constant 1 kN against a support on a 1e7 N/m horizontal spring (vertical
   // and rotation held): at equilibrium the support has moved F / kx = 0.1 mm. 0.5 %: equilibrium
@@ -499,7 +530,7 @@ TEST(Effects, ValidateNamesTheKeyAndTheValue) {
 }
 
 TEST(EffectRegistry, EveryEffectSwitchesOnAndRunsTheReferenceArch) {
-  ASSERT_EQ(effect_registry().size(), 7u);
+  ASSERT_EQ(effect_registry().size(), 8u);
   EXPECT_THROW(find_effect("magic"), SceneError);
   ArchOptions o;
   o.max_displacement = 0.003;

@@ -133,13 +133,21 @@ TEST(BayesOptimiser, FindsTheMinimumAndResumesExactly) {
   EXPECT_EQ(run(5), straight);
 }
 
-TEST(BayesOptimiser, StartsItsDesignAtTheGivenPoint) {
-  const Problem problem;
-  const auto space = space_of(problem.f);
+namespace {
+// A design of 10 points within a budget of 20, seed 2.
+optimise::OptimiserOptions design_of_ten() {
   optimise::OptimiserOptions o;
   o.population = 10;
   o.max_evaluations = 20;
   o.seed = 2;
+  return o;
+}
+}  // namespace
+
+TEST(BayesOptimiser, StartsItsDesignAtTheGivenPoint) {
+  const Problem problem;
+  const auto space = space_of(problem.f);
+  optimise::OptimiserOptions o = design_of_ten();
   const Eigen::VectorXd start = space.to_physical(Eigen::VectorXd::Constant(space.dimension(), 0.3));
   o.initial_point.assign(start.data(), start.data() + start.size());
   auto opt = make_bayes_optimiser(space, o, gp_kind());
@@ -159,10 +167,7 @@ TEST(BayesOptimiser, StartsItsDesignAtTheGivenPoint) {
 TEST(BayesOptimiser, KnownRunsReplaceOnlyTheDesignPointsBesideThem) {
   const Problem problem;
   const auto space = space_of(problem.f);
-  optimise::OptimiserOptions o;
-  o.population = 10;
-  o.max_evaluations = 20;
-  o.seed = 2;
+  const optimise::OptimiserOptions o = design_of_ten();
   const auto design = make_bayes_optimiser(space, o, gp_kind())->ask();
   ASSERT_EQ(design.size(), 10u);
   auto row = [&](const Eigen::VectorXd& unit) { return TrainingRow{unit, problem(space.to_physical(unit))}; };

@@ -27,6 +27,8 @@ enum class SearchScale {
   peak_normal_stress,  // scaled_min..scaled_max x the largest normal stress at a contact node (Pa),
                        // never below the largest one at the start of loading (a strength below it
                        // crushes the structure under its weight and pre-compression before the test)
+  stress_level,        // the same multiples of that stress, with no floor: a stress a law's response
+                       // is measured against, not a strength (shear stiffening's doubling stress)
 };
 
 // One numeric parameter of an effect, named as set_parameter's field ("closure_max").

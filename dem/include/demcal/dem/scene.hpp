@@ -71,11 +71,21 @@ struct JointMaterial {
   double compressive_strength = 0;  // Pa
   double crushing_softening = 0;    // m
 
+  // shear-stiffening (`shear_stiffening_stress`, Pa; 0 = off): the shear stiffness grows with the
+  // node's normal stress s, ks (1 + s / shear_stiffening_stress), up to kShearStiffening x ks, as
+  // rough joints stiffen in shear under pressure (Kulhawy; Bandis, Lumsden and Barton): the stress
+  // given doubles ks. Joints that carry more pre-compression then take shear load more stiffly.
+  double shear_stiffening_stress = 0;
+  static constexpr double kShearStiffening = 16;
+
   bool closure_on() const { return closure_max > 0; }
+  bool shear_stiffening_on() const { return shear_stiffening_stress > 0; }
   bool softening_on() const { return slip_softening > 0; }
   bool cohesion_on() const { return cohesion > 0 || tensile_strength > 0; }
   bool crushing_on() const { return compressive_strength > 0; }
-  bool plain() const { return !closure_on() && !softening_on() && !cohesion_on() && !crushing_on(); }
+  bool plain() const {
+    return !closure_on() && !shear_stiffening_on() && !softening_on() && !cohesion_on() && !crushing_on();
+  }
 
   void Validate(const std::string& where) const;  // throws SceneError naming the value
 };
@@ -229,7 +239,7 @@ std::string scene_hash(const Scene& scene);
 // Calibration parameters by name. Joint-group parameters: "kn", "ks" (Pa/m), "friction_deg"
 // (degrees) and the effect parameters "closure_max" (m), "friction_residual_deg" or
 // "friction_loss_deg" (degrees; setting one clears the other),
-// "slip_softening" (m), "cohesion", "tensile_strength", "compressive_strength" (Pa),
+// "slip_softening" (m), "shear_stiffening_stress", "cohesion", "tensile_strength", "compressive_strength" (Pa),
 // "crushing_softening" (m): a bare name sets every joint group, "<group>.<name>" one group.
 // Support springs by block: "<block>.support_kx", "<block>.support_ky" (N/m), "<block>.support_kr"
 // (N m/rad); bare, they set every fixed block. "beam_kr" (N m/rad) sets the loaded block's
