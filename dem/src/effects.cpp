@@ -38,6 +38,18 @@ EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScal
   return out;
 }
 
+std::string scaled_range_words(const EffectParameter& p, const ResponseScales& scales) {
+  if (p.search_scale == SearchScale::absolute || !(scales.peak_normal_stress > 0) ||
+      !std::isfinite(scales.peak_normal_stress))
+    return "";
+  const auto number = [](double v) { return format_number(v, {.significant_digits = 3, .non_finite = "–"}); };
+  std::string words = number(p.scaled_min) + " to " + number(p.scaled_max) + " x the largest contact stress of the base fit, " +
+                      number(scales.peak_normal_stress) + " Pa";
+  if (p.search_scale == SearchScale::peak_normal_stress)
+    words += ", and not below the largest at the start of loading, " + number(scales.start_normal_stress) + " Pa";
+  return words;
+}
+
 const std::vector<Effect>& effect_registry() {
   static const std::vector<Effect> registry = build_registry();
   return registry;

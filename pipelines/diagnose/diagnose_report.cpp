@@ -181,13 +181,9 @@ void write_best_sets(std::ostream& md, const Diagnosis& d, const DiagnoseOptions
       for (const auto& [k, range] : c.search_ranges) {
         md << " " << k << " " << num(range[0]) << " to " << num(range[1]);
         for (const auto& p : effect.parameters)
-          if (p.name == dem::parameter_field(k) && p.search_scale != dem::SearchScale::absolute && std::isfinite(d.peak_normal_stress)) {
-            md << " (" << num(p.scaled_min) << " to " << num(p.scaled_max)
-               << " x the largest contact stress of the base fit, " << num(d.peak_normal_stress) << " Pa";
-            if (p.search_scale == dem::SearchScale::peak_normal_stress)
-              md << ", and not below the largest at the start of loading, " << num(d.start_normal_stress) << " Pa";
-            md << ")";
-          }
+          if (p.name == dem::parameter_field(k))
+            if (const std::string words = dem::scaled_range_words(p, {d.peak_normal_stress, d.start_normal_stress}); !words.empty())
+              md << " (" << words << ")";
         md << ";";
       }
       md.seekp(-1, std::ios_base::cur);

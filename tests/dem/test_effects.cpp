@@ -596,6 +596,25 @@ TEST(EffectRegistry, CompressiveStrengthIsSearchedBelowTheLargestContactStress) 
   // A parameter without a scale is unchanged.
   const EffectParameter& softening = find_effect("crushing-cap").parameters.back();
   EXPECT_EQ(scaled_search_range(softening, scales).search_max, softening.search_max);
+  EXPECT_EQ(scaled_range_words(softening, scales), "");
+}
+
+// A stress level (shear stiffening's doubling stress) scales like a strength but has no floor: a
+// stress far below the one at the start of loading is a strong stiffening, not a crushed structure.
+TEST(EffectRegistry, AStressLevelIsScaledWithoutTheStrengthsFloor) {
+  const EffectParameter& stress = find_effect("shear-stiffening").parameters.front();
+  ASSERT_EQ(stress.search_scale, SearchScale::stress_level);
+  const ResponseScales scales{1e6, 0.5e6};  // peak, start
+  const EffectParameter scaled = scaled_search_range(stress, scales);
+  EXPECT_DOUBLE_EQ(scaled.search_min, stress.scaled_min * 1e6);
+  EXPECT_LT(scaled.search_min, scales.start_normal_stress);
+  EXPECT_DOUBLE_EQ(scaled.search_max, stress.scaled_max * 1e6);
+  const std::string words = scaled_range_words(stress, scales);
+  EXPECT_NE(words.find("x the largest contact stress of the base fit, 1e+06 Pa"), std::string::npos) << words;
+  EXPECT_EQ(words.find("not below"), std::string::npos) << words;
+  const std::string strength = scaled_range_words(find_effect("crushing-cap").parameters.front(), scales);
+  EXPECT_NE(strength.find("not below the largest at the start of loading, 5e+05 Pa"), std::string::npos) << strength;
+  EXPECT_EQ(scaled_range_words(stress, ResponseScales{}), "");  // unknown scale: the absolute range
 }
 
 std::pair<int, std::string> run_demcal(const std::string& args) {

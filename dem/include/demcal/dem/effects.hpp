@@ -68,6 +68,10 @@ struct ResponseScales {
 // `p` with its search range resolved for a structure (see SearchScale) when the parameter has a
 // scale and the scale is known (> 0), clipped to the physical bounds; else `p` unchanged.
 EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScales& scales);
+// How scaled_search_range resolved `p`'s range, in words for a report ("0.03 to 3 x the largest
+// contact stress of the base fit, 8.2e+05 Pa, and not below ..."); "" for an absolute range or an
+// unknown scale.
+std::string scaled_range_words(const EffectParameter& p, const ResponseScales& scales);
 
 // What an effect attaches to, and so what enable_effect's `targets` name.
 enum class EffectTarget {
