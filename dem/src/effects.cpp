@@ -26,9 +26,18 @@ std::string to_string(EffectTarget target) {
   return "unknown";
 }
 
+namespace {
+
+// Whether `p` has a structure-relative range and the structure's stress is known.
+bool scale_applies(const EffectParameter& p, const ResponseScales& scales) {
+  return p.search_scale != SearchScale::absolute && scales.peak_normal_stress > 0 && std::isfinite(scales.peak_normal_stress);
+}
+
+}  // namespace
+
 EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScales& scales) {
   EffectParameter out = p;
-  if (p.search_scale != SearchScale::absolute && scales.peak_normal_stress > 0 && std::isfinite(scales.peak_normal_stress)) {
+  if (scale_applies(p, scales)) {
     const bool strength = p.search_scale == SearchScale::peak_normal_stress;
     const double start = strength && std::isfinite(scales.start_normal_stress) ? scales.start_normal_stress : 0.0;
     out.search_max = std::clamp(p.scaled_max * scales.peak_normal_stress, p.lower_bound, p.upper_bound);
@@ -39,9 +48,7 @@ EffectParameter scaled_search_range(const EffectParameter& p, const ResponseScal
 }
 
 std::string scaled_range_words(const EffectParameter& p, const ResponseScales& scales) {
-  if (p.search_scale == SearchScale::absolute || !(scales.peak_normal_stress > 0) ||
-      !std::isfinite(scales.peak_normal_stress))
-    return "";
+  if (!scale_applies(p, scales)) return "";
   const auto number = [](double v) { return format_number(v, {.significant_digits = 3, .non_finite = "–"}); };
   std::string words = number(p.scaled_min) + " to " + number(p.scaled_max) + " x the largest contact stress of the base fit, " +
                       number(scales.peak_normal_stress) + " Pa";

@@ -28,10 +28,11 @@ namespace {
 
 fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("surrogate", name); }
 
-std::string make_measurement(const fs::path& dir) {
-  const std::string path = (dir / "measured.csv").string();
+// The toy wall's measurement (k 2e7, friction 32°, 20 N of noise drawn with `seed`) in dir/NAME.
+std::string make_measurement(const fs::path& dir, const std::string& name = "measured.csv", int seed = 7) {
+  const std::string path = (dir / name).string();
   ProcessOptions o;
-  o.argv = {python(), test_support::kToySimulator, "2e7", "32", path, "--noise", "20", "--seed", "7"};
+  o.argv = {python(), test_support::kToySimulator, "2e7", "32", path, "--noise", "20", "--seed", std::to_string(seed)};
   o.timeout_s = 30;
   EXPECT_TRUE(run_process(o).ok());
   return path;
@@ -311,11 +312,7 @@ TEST(SurrogateCampaign, EarlierRunsOfAnotherObjectiveAreScoredAndTrainTheModel) 
   EXPECT_EQ(read_json(dir / "first" / "result.json")["iterations"], 1 + (20 - 8) / 2) << "the design, then rounds of 2";
 
   // Another measurement of the same wall: another objective key, the same runs.
-  ProcessOptions m;
-  m.argv = {python(), test_support::kToySimulator, "2e7", "32", (dir / "other.csv").string(), "--noise", "20", "--seed", "8"};
-  m.timeout_s = 30;
-  ASSERT_TRUE(run_process(m).ok());
-  campaign["measured"] = (dir / "other.csv").string();
+  campaign["measured"] = make_measurement(dir, "other.csv", 8);
   std::ofstream(dir / "second.json") << campaign.dump(2);
   const auto second = calibrate(dir / "second.json", dir / "second", false, nullptr, archive);
   ASSERT_TRUE(second.ok()) << second.message;
