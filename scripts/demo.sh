@@ -4,9 +4,9 @@
 # demo-out/calibration/{result.json,report.md,figures/,archive.sqlite}; then diagnose a record made
 # by another DEM code whose effect it does not declare (data/refdem-arch/A-support-1.csv, a right
 # abutment on a spring) into demo-out/diagnosis/, and print the verdict. The diagnosis is shortened
-# to fit a demo: two candidates calibrated, no further search, no parameter bounds, no removal check,
-# one effect at most (--max-effects 1; without it an accepted effect is followed by a diagnosis of
-# the model with it).
+# to fit a demo: two candidates calibrated, 40 simulations each (the default is 80), no further
+# search, no parameter bounds, no removal check, one effect at most (--max-effects 1; without it an
+# accepted effect is followed by a diagnosis of the model with it).
 #
 # The output folder is emptied first: the archive reuses a run whose scene and parameters it already
 # holds, whatever engine version made it, so a demo after an engine change must not read old runs.
@@ -25,7 +25,7 @@ python3 -c 'import json,sys; r=json.load(open(sys.argv[1])); print(json.dumps({"
 
 echo
 echo "diagnosing data/refdem-arch/A-support-1.csv (another code's record, effect not declared) ..."
-"$build/demcal" diagnose data/refdem-arch/A-campaign.json --out "$diag" --quiet --candidates 2 --close-target-share 1 \
+"$build/demcal" diagnose data/refdem-arch/A-campaign.json --out "$diag" --quiet --candidates 2 --candidate-simulations 40 --close-target-share 1 \
   --continued-simulations 0 --no-parameter-bounds --no-removal-check --max-effects 1 > "$diag.log"
 python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); t=d["timing"]; print("verdict:", d["headline"]); print("force error %.0f N -> %.0f N, %d simulations, %.0f s (simulations %.0f s, model %.0f s)" % (d["error_before"], d["error_after"], d["simulations"], t["wall_s"], t["simulations_s"], t["model_s"]))' "$diag/diagnosis.json"
 echo "report: $diag/report.md"

@@ -75,7 +75,9 @@ void setup(CLI::App& app) {
   auto* at_split = sub->add_option("--candidates-at-split", o.candidates_at_split,
                                    "Effects calibrated at most where the base fit's re-runs scatter by more than the noise "
                                    "(0 = every effect; default: every effect, or --candidates when given)");
-  sub->add_option("--candidate-simulations", o.candidate_simulations, "Simulations per candidate calibration (0 = the campaign's)");
+  sub->add_option("--candidate-simulations", o.candidate_simulations,
+                  "Simulations per candidate calibration and for the base refinement (0 = the campaign's)")
+      ->capture_default_str();
   sub->add_option("--continued-simulations", o.continued_simulations,
                   "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter, "
                   "then, while no fit explains the curves, for each contender (-1 = a candidate's budget, 0 = none)")

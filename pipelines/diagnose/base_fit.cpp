@@ -9,6 +9,14 @@
 #include <filesystem>
 #include <fstream>
 
+namespace demcal::pipelines {
+
+long candidate_budget(const DiagnoseOptions& options, const CampaignConfig& config) {
+  return options.candidate_simulations > 0 ? options.candidate_simulations : config.optimiser.evaluation_budget();
+}
+
+}  // namespace demcal::pipelines
+
 namespace demcal::pipelines::detail {
 
 namespace fs = std::filesystem;
@@ -60,8 +68,7 @@ void fit_base(DiagnosisRun& run) {
   const DiagnoseOptions& options = run.options;
   Diagnosis& d = run.d;
   d.base_params = base_fit(config, options, run.runner, &d.base_fitness);
-  run.per_candidate = options.candidate_simulations > 0 ? options.candidate_simulations
-                                                        : config.optimiser.evaluation_budget();
+  run.per_candidate = candidate_budget(options, config);
   // Within a total budget the refinement takes at most a quarter of what the base fit left.
   const long refine_budget = options.max_simulations > 0
                                  ? std::min(run.per_candidate, (options.max_simulations - run.runner.simulations()) / 4)

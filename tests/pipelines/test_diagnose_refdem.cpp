@@ -54,6 +54,20 @@ class RefdemRecord : public ::testing::TestWithParam<Realisation> {};
 
 }  // namespace
 
+// A candidate's search is not cut to the campaign's own budget (A-campaign.json: 40 runs of the
+// base's three parameters) unless asked: it searches more parameters, away from the base fit.
+TEST(CandidateBudget, IsItsOwnUnlessZeroAsksForTheCampaigns) {
+  const CampaignConfig config =
+      campaign_from_json(test_support::read_json(kRecords / "A-campaign.json"), kRecords.string(), "A-campaign.json");
+  ASSERT_EQ(config.optimiser.evaluation_budget(), 40);
+  DiagnoseOptions o;
+  EXPECT_EQ(candidate_budget(o, config), 80);
+  o.candidate_simulations = 0;
+  EXPECT_EQ(candidate_budget(o, config), 40);
+  o.candidate_simulations = 24;
+  EXPECT_EQ(candidate_budget(o, config), 24);
+}
+
 // The other code's control (kn 2.9e9, ks 1.2e9, friction 32.5°, 1.5 % noise): whatever effects are
 // on offer, none is needed, and the verdict says it with the numbers.
 TEST_P(RefdemRecord, TheControlNeedsNoEffect) {

@@ -246,7 +246,10 @@ struct DiagnoseOptions {
   // than scatter_floor_ratio x the noise (response_splits): there a signature is a difference of
   // single runs and ranks effects by realisation as much as by shape. 0: every effect; else >= candidates.
   int candidates_at_split = 0;
-  int candidate_simulations = 0;      // --candidate-simulations: per candidate calibration; 0 = the campaign's
+  // --candidate-simulations: per candidate calibration (and the base refinement); 0 = the campaign's.
+  // 80: a candidate searches its effect's parameters beside the base ones, and the base fit's
+  // compensation moves where the extended model's valley lies (docs/diagnose.md, step 4).
+  int candidate_simulations = 80;
   // --close-target-share: an effect with several targets (a gap at each hinge, springs at either
   // support) is calibrated at its best-signature target and at every other target whose signature
   // explains at least this share of the best one's; the lower error is kept. In (0, 1].
@@ -606,6 +609,10 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis
 // is named with its error and criterion (a joint gap can be imitated by a compliant support whose
 // fit stays above that level). "" otherwise.
 std::string unexplained_fit_note(const Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// The simulations of each candidate calibration and of the base refinement: options.candidate_simulations,
+// or where that is 0 the campaign's own budget (its optimiser's evaluation_budget()).
+long candidate_budget(const DiagnoseOptions& options, const CampaignConfig& config);
 
 // The simulations per candidate a further diagnosis should get when this one leaves the question
 // open (no effect found: the base misses by more than kUnexplainedRatio x the floor and no
