@@ -247,8 +247,9 @@ struct DiagnoseOptions {
   // single runs and ranks effects by realisation as much as by shape. 0: every effect; else >= candidates.
   int candidates_at_split = 0;
   // --candidate-simulations: per candidate calibration (and the base refinement); 0 = the campaign's.
-  // 80: a candidate searches its effect's parameters beside the base ones, and the base fit's
-  // compensation moves where the extended model's valley lies (docs/diagnose.md, step 4).
+  // 80 whatever the campaign's budget: a candidate searches more parameters than the base, from a
+  // base fit whose compensation for the missing effect can lie far from the extended model's
+  // valley (measured: docs/diagnose.md, step 4).
   int candidate_simulations = 80;
   // --close-target-share: an effect with several targets (a gap at each hinge, springs at either
   // support) is calibrated at its best-signature target and at every other target whose signature
