@@ -117,6 +117,11 @@ void OptimiserOptions::Validate() const {
   for (std::size_t k = 0; k < initial_point.size(); ++k)
     if (!std::isfinite(initial_point[k]))
       fail("option initial_point[" + std::to_string(k) + "] = " + format_number(initial_point[k], round_trip_digits) + " is not finite");
+  for (std::size_t i = 0; i < further_starts.size(); ++i)
+    for (std::size_t k = 0; k < further_starts[i].size(); ++k)
+      if (!std::isfinite(further_starts[i][k]))
+        fail("option further_starts[" + std::to_string(i) + "][" + std::to_string(k) + "] = " +
+             format_number(further_starts[i][k], round_trip_digits) + " is not finite");
   if (polish_evaluations < 0)
     fail("option polish_evaluations = " + std::to_string(polish_evaluations) + " must be >= 0");
   if (polish_evaluations > 0) {
@@ -219,6 +224,10 @@ std::unique_ptr<Optimiser> make_optimiser(const ParameterSpace& space, const Opt
   if (!options.initial_point.empty() && static_cast<int>(options.initial_point.size()) != space.dimension())
     fail("option initial_point has " + std::to_string(options.initial_point.size()) + " values, the space has " +
          std::to_string(space.dimension()) + " free parameters");
+  for (std::size_t i = 0; i < options.further_starts.size(); ++i)
+    if (static_cast<int>(options.further_starts[i].size()) != space.dimension())
+      fail("option further_starts[" + std::to_string(i) + "] has " + std::to_string(options.further_starts[i].size()) +
+           " values, the space has " + std::to_string(space.dimension()) + " free parameters");
   if (options.polish_evaluations > 0) return detail::make_polished(space, options);
   if (options.algorithm == "pso") return detail::make_swarm(space, options, false);
   if (options.algorithm == "tbpso") return detail::make_swarm(space, options, true);

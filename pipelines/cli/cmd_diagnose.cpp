@@ -82,6 +82,10 @@ void setup(CLI::App& app) {
                   "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter, "
                   "then, while no fit explains the curves, for each contender (-1 = a candidate's budget, 0 = none)")
       ->capture_default_str();
+  sub->add_option("--candidate-starts", o.candidate_starts,
+                  "Points of each candidate's search design that start from a base fit: the best, then the best "
+                  "base sets of other regions")
+      ->capture_default_str();
   sub->add_option("--candidate-algorithm", o.candidate_algorithm,
                   "Optimiser of each candidate: bo (default), nlopt:NAME (local, warm-started) or tbpso | pso | ga");
   sub->add_option("--surrogate-kind", o.surrogate_kind, "Surrogate of the refinement's and candidates' searches: gp | mlp")

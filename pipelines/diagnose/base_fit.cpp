@@ -25,7 +25,7 @@ using nlohmann::json;
 namespace {
 
 std::map<std::string, double> base_fit(const CampaignConfig& config, const DiagnoseOptions& options, CaseRunner& runner,
-                                       double* fitness) {
+                                       double* fitness, std::vector<ParameterSet>& runs) {
   if (!options.result.empty()) {
     fs::path result = options.result;
     if (fs::is_directory(result)) result /= "result.json";
@@ -55,6 +55,7 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
   run.progress = options.progress;
   const CampaignResult result = run_campaign(base, run);
   runner.add_campaign(result);
+  runs.insert(runs.end(), result.all.begin(), result.all.end());
   if (result.status != CampaignStatus::completed || result.best.params.empty())
     throw CampaignError("the base calibration failed: " + result.message);
   *fitness = result.best.fitness;
@@ -67,7 +68,8 @@ void fit_base(DiagnosisRun& run) {
   const CampaignConfig& config = run.config;
   const DiagnoseOptions& options = run.options;
   Diagnosis& d = run.d;
-  d.base_params = base_fit(config, options, run.runner, &d.base_fitness);
+  std::vector<ParameterSet> runs;  // every set the base calibrations evaluated
+  d.base_params = base_fit(config, options, run.runner, &d.base_fitness, runs);
   run.per_candidate = candidate_budget(options, config);
   // Within a total budget the refinement takes at most a quarter of what the base fit left.
   const long refine_budget = options.max_simulations > 0
@@ -84,6 +86,7 @@ void fit_base(DiagnosisRun& run) {
     run_options.progress = options.progress;
     const CampaignResult r = run_campaign(refine, run_options);
     run.runner.add_campaign(r);
+    runs.insert(runs.end(), r.all.begin(), r.all.end());
     if (r.status == CampaignStatus::completed && std::isfinite(r.best.fitness) &&
         (!std::isfinite(d.base_fitness) || r.best.fitness < d.base_fitness)) {
       d.base_params = r.best.params;
@@ -91,6 +94,8 @@ void fit_base(DiagnosisRun& run) {
     }
   }
   run.base_params = complete_parameters(config, d.base_params);
+  run.d.further_starts =
+      further_start_sets(d.base_params, runs, config.space, options.candidate_starts - 1, options.start_separation);
 }
 
 }  // namespace demcal::pipelines::detail

@@ -56,6 +56,8 @@ void DiagnoseOptions::Validate() const {
   at_least("--held-out-ratio", held_out_ratio, 1);
   if (candidate_algorithm.empty()) fail("--candidate-algorithm", "\"\"", "must name an optimiser");
   if (surrogate_kind != "gp" && surrogate_kind != "mlp") fail("--surrogate-kind", "\"" + surrogate_kind + "\"", "must be gp or mlp");
+  at_least("--candidate-starts", candidate_starts, 1);
+  share("start_separation", start_separation);
   if (!(candidate_initial_step > 0 && candidate_initial_step <= 0.5))
     fail("candidate_initial_step", text(candidate_initial_step), "must be in (0, 0.5]");
   const bool wide = narrow_log_factor == 0 && narrow_linear_share == 0;
@@ -193,6 +195,8 @@ json ContinuedSearch::to_json() const {
 json Diagnosis::to_json() const {
   json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)},
                {"rerun_errors", base_rerun_errors}};
+  base["further_starts"] = json::array();
+  for (const auto& s : further_starts) base["further_starts"].push_back(params_json(s));
   json residuals = json::array();
   for (const auto& r : base_residuals) residuals.push_back(r.to_json());
   base["residual"] = residuals;

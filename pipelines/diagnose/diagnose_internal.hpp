@@ -160,14 +160,17 @@ double parameter_cap(const std::string& name, const dem::EffectParameter& p, con
 optimise::ParameterSpace extended_space(const ExtendedModel& m, const CampaignConfig& config,
                                         const std::map<std::string, double>& best, const DiagnoseOptions& options);
 // The campaign that calibrates base + effect (`m`; none: the base alone) from `best`, into `folder`,
-// at most `evaluations` simulations, warm-started at `warm`.
+// at most `evaluations` simulations, warm-started at `warm`; for "bo", its design starts also at
+// each of `further_base` (other base sets, further_start_sets) with the effect as in `warm`.
 CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
                                  const std::map<std::string, double>& best, const DiagnoseOptions& options,
                                  long evaluations, const std::filesystem::path& folder,
-                                 const std::map<std::string, double>& warm);
+                                 const std::map<std::string, double>& warm,
+                                 const std::vector<std::map<std::string, double>>& further_base = {});
 
 // The extended calibration of one candidate: base + its effect into `folder`, at most `budget`
-// simulations, warm-started at `warm`; its best set (into `best_set`, on every case) re-run and the
+// simulations, warm-started at `warm` (and at `further_base`, as extended_campaign), every set it
+// evaluated appended to `searched` (when given); its best set (into `best_set`, on every case) re-run and the
 // fit judged on the run of median error, since the best of many runs of a model that slips or snaps
 // may be a lucky one. Sets the fit's fields of `c` (its simulations added); false, with `c.reason`,
 // when the best set cannot be re-simulated. Throws what run_campaign throws.
@@ -175,7 +178,8 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
                          const CampaignConfig& config, const std::map<std::string, double>& base_params,
                          const DiagnoseOptions& options, long budget, const std::filesystem::path& folder,
                          const std::map<std::string, double>& warm, const std::vector<ChannelResidual>& base_residuals,
-                         CaseRunner& runner);
+                         CaseRunner& runner, const std::vector<std::map<std::string, double>>& further_base = {},
+                         std::vector<ParameterSet>* searched = nullptr);
 
 // Whether a signature share comes within `share` of a positive reference share: a signature is a
 // linearisation from a few single runs, so shares that close do not order two targets or effects.
@@ -232,6 +236,7 @@ struct DiagnosisRun {
 
   // 4-6. calibrations and selection
   std::map<std::string, std::map<std::string, double>> best_sets;  // effect -> its fit's complete set
+  std::map<std::string, std::vector<ParameterSet>> searched;       // effect -> every set its calibrations evaluated
   std::vector<double> effective_points;                            // score_candidates' last count
 
   // `wanted` simulations, within a total budget: room is left for a best set's run and re-runs.

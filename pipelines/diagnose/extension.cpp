@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <optional>
 
 namespace demcal::pipelines {
 
@@ -50,6 +51,39 @@ std::vector<double> candidate_start(const optimise::ParameterSpace& space, const
     start.push_back(std::clamp(v, lower(k), upper(k)));
   }
   return start;
+}
+
+std::vector<std::map<std::string, double>> further_start_sets(const std::map<std::string, double>& best,
+                                                              const std::vector<ParameterSet>& runs,
+                                                              const optimise::ParameterSpace& space, int count,
+                                                              double separation) {
+  const auto names = space.free_names();
+  const auto n = static_cast<Eigen::Index>(names.size());
+  const auto unit = [&](const std::map<std::string, double>& set) -> std::optional<Eigen::VectorXd> {
+    Eigen::VectorXd x(n);
+    for (Eigen::Index k = 0; k < n; ++k) {
+      const auto it = set.find(names[static_cast<std::size_t>(k)]);
+      if (it == set.end() || !std::isfinite(it->second)) return std::nullopt;
+      x(k) = it->second;
+    }
+    return space.to_unit(x).cwiseMax(0.0).cwiseMin(1.0);
+  };
+  std::vector<const ParameterSet*> ranked;
+  for (const auto& r : runs)
+    if (std::isfinite(r.fitness) && unit(r.params)) ranked.push_back(&r);
+  std::stable_sort(ranked.begin(), ranked.end(), [](const ParameterSet* a, const ParameterSet* b) { return a->fitness < b->fitness; });
+  std::vector<Eigen::VectorXd> taken;
+  if (const auto b = unit(best)) taken.push_back(*b);
+  std::vector<std::map<std::string, double>> starts;
+  for (const ParameterSet* r : ranked) {
+    if (static_cast<int>(starts.size()) >= count) break;
+    const Eigen::VectorXd x = *unit(r->params);
+    if (std::all_of(taken.begin(), taken.end(), [&](const Eigen::VectorXd& t) { return (x - t).norm() >= separation; })) {
+      taken.push_back(x);
+      starts.push_back(r->params);
+    }
+  }
+  return starts;
 }
 
 namespace detail {
@@ -141,7 +175,8 @@ optimise::ParameterSpace extended_space(const ExtendedModel& m, const CampaignCo
 
 CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& config,
                                  const std::map<std::string, double>& best, const DiagnoseOptions& options,
-                                 long evaluations, const fs::path& folder, const std::map<std::string, double>& warm) {
+                                 long evaluations, const fs::path& folder, const std::map<std::string, double>& warm,
+                                 const std::vector<std::map<std::string, double>>& further_base) {
   CampaignConfig c = fitted_cases(m.config, options);
   c.space = extended_space(m, config, best, options);
   const optimise::ParameterSpace& space = c.space;
@@ -160,6 +195,11 @@ CampaignConfig extended_campaign(const ExtendedModel& m, const CampaignConfig& c
     // Warm start: the base best with the effect at its best-explaining probe (the local search's
     // start; the first point of the Bayesian search's design).
     c.optimiser.initial_point = candidate_start(space, warm, best);
+    for (const auto& other : further_base) {
+      std::map<std::string, double> start = warm;
+      for (const auto& p : config.space.free_parameters()) start[p.name] = other.at(p.name);
+      c.optimiser.further_starts.push_back(candidate_start(space, start, other));
+    }
     if (local) {
       c.optimiser.initial_step = options.candidate_initial_step;
       c.polish.enabled = false;
@@ -175,8 +215,9 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
                          const CampaignConfig& config, const std::map<std::string, double>& base_params,
                          const DiagnoseOptions& options, long budget, const fs::path& folder,
                          const std::map<std::string, double>& warm, const std::vector<ChannelResidual>& base_residuals,
-                         CaseRunner& runner) {
-  const CampaignConfig ext = extended_campaign(m, config, base_params, options, budget, folder, warm);
+                         CaseRunner& runner, const std::vector<std::map<std::string, double>>& further_base,
+                         std::vector<ParameterSet>* searched) {
+  const CampaignConfig ext = extended_campaign(m, config, base_params, options, budget, folder, warm, further_base);
   for (const auto& p : ext.space.free_parameters())  // the calibration's own box (its residual friction capped lower)
     if (c.search_ranges.count(p.name)) c.search_ranges[p.name] = {p.lower, p.upper};
   RunOptions run;
@@ -184,6 +225,7 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
   run.progress = options.progress;
   const CampaignResult r = run_campaign(ext, run);
   runner.add_campaign(r);
+  if (searched) searched->insert(searched->end(), r.all.begin(), r.all.end());
   c.simulations += r.simulations;
   c.params = r.best.params;
   c.fitness = r.best.fitness;
@@ -234,7 +276,7 @@ void calibrate_close_targets(DiagnosisRun& run, EffectCandidate& c) {
     std::map<std::string, double> alt_set;
     try {
       calibrate_candidate(alt, alt_set, other.model, run.config, run.d.base_params, options, other_budget, other_folder,
-                          other.warm, run.base.residuals, run.runner);
+                          other.warm, run.base.residuals, run.runner, run.d.further_starts, &run.searched[c.effect]);
     } catch (const std::exception& ex) {
       progress(options, "the calibration of " + c.effect + " at " + alt.target + " failed: " + ex.what());
     }
@@ -263,6 +305,12 @@ void calibrate_candidates(DiagnosisRun& run) {
     progress(options, "the base fit sits where the response splits (scatter " + format_number(run.scatter, 3) + " N, noise " +
                           format_number(run.noise, 3) + " N): more than the top " + std::to_string(options.candidates) +
                           " effects by signature are calibrated (--candidates-at-split)");
+  for (const auto& start : run.d.further_starts) {
+    std::string text;
+    for (const auto& p : run.config.space.free_parameters())
+      text += (text.empty() ? "" : ", ") + p.name + " " + format_number(start.at(p.name), 4);
+    progress(options, "a further start of the candidates' searches: " + text);
+  }
   int tried = 0;
   double last_tried_signature = 0;  // of the limit-th effect tried
   for (auto& c : run.d.candidates) {
@@ -285,7 +333,8 @@ void calibrate_candidates(DiagnosisRun& run) {
     c.tried = true;
     try {
       calibrate_candidate(c, run.best_sets[c.effect], run.models.at(c.effect), run.config, run.d.base_params, options,
-                          budget, folder, run.warm_starts[c.effect], run.base.residuals, run.runner);
+                          budget, folder, run.warm_starts[c.effect], run.base.residuals, run.runner, run.d.further_starts,
+                          &run.searched[c.effect]);
     } catch (const std::exception& ex) {
       c.reason = std::string("its calibration failed: ") + ex.what();
     }

@@ -49,6 +49,11 @@ std::unique_ptr<DiagnosisRun> next_step(const DiagnosisRun& run, const std::vect
   next->d.base_params = c.params;
   next->d.base_fitness = c.fitness;
   next->base_params = best;
+  // the added effect's searches evaluated the new base's space: their best sets of other regions
+  // start the next candidates' searches too
+  if (const auto searched = run.searched.find(c.effect); searched != run.searched.end())
+    next->d.further_starts =
+        further_start_sets(c.params, searched->second, config.space, options.candidate_starts - 1, options.start_separation);
   return next;
 }
 

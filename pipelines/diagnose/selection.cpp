@@ -343,7 +343,7 @@ void search_further(DiagnosisRun& run, const std::string& name, long budget, dou
   further.config.optimiser.seed += 1;
   try {
     calibrate_candidate(next, next_set, further, run.config, run.d.base_params, options, budget, folder,
-                        run.best_sets.at(c.effect), run.base.residuals, run.runner);
+                        run.best_sets.at(c.effect), run.base.residuals, run.runner, {}, &run.searched[c.effect]);
   } catch (const std::exception& ex) {
     progress(options, "the continued search of " + c.effect + " failed: " + ex.what());
   }

@@ -106,7 +106,8 @@ class BayesOptimiser final : public optimise::Optimiser {
     const int d = space.dimension();
     for (const auto& r : warm_)
       if (r.unit.size() != d) throw std::invalid_argument("bo: a warm row has the wrong dimension");
-    const long wanted = std::max<long>(surrogate_.min_runs, options.population);
+    const long given = (options.initial_point.empty() ? 0 : 1) + static_cast<long>(options.further_starts.size());
+    const long wanted = std::max<long>({surrogate_.min_runs, options.population, given});
     // Latin hypercube: one point per stratum of every coordinate, strata permuted per coordinate.
     std::mt19937_64 rng = seeded_rng(options.seed);
     Eigen::MatrixXd lhs(wanted, d);
@@ -117,10 +118,14 @@ class BayesOptimiser final : public optimise::Optimiser {
       for (long i = 0; i < wanted; ++i)
         lhs(i, k) = (static_cast<double>(perm[static_cast<size_t>(i)]) + uniform01(rng)) / static_cast<double>(wanted);
     }
-    // A given start is the design's first point: a warm start from a known good set.
-    if (!options.initial_point.empty())
-      lhs.row(0) = space.to_unit(Eigen::Map<const Eigen::VectorXd>(options.initial_point.data(), d))
-                       .cwiseMax(0.0).cwiseMin(1.0).transpose();
+    // Given starts are the design's first points: a warm start from a known good set, then the
+    // further starts (other basins).
+    std::vector<const std::vector<double>*> starts;
+    if (!options.initial_point.empty()) starts.push_back(&options.initial_point);
+    for (const auto& s : options.further_starts) starts.push_back(&s);
+    for (size_t i = 0; i < starts.size(); ++i)
+      lhs.row(static_cast<Eigen::Index>(i)) = space.to_unit(Eigen::Map<const Eigen::VectorXd>(starts[i]->data(), d))
+                                                  .cwiseMax(0.0).cwiseMin(1.0).transpose();
     // Known runs stand in for the design points they lie near (within half the design's spacing,
     // 0.5 n^(-1/d)), not for a count of them: runs clustered at one set (a diagnosis's probes
     // around its base fit) leave the rest of the box to the design, an earlier campaign's spread

@@ -449,6 +449,8 @@ TEST(Optimiser, BadOptionsAreNamed) {
                  "polish_initial_step = 0");
   expect_invalid([&] { make([](auto& o) { o.algorithm = "nlopt:LN_BOBYQA"; o.initial_point = {1e12}; }); }, "'kn'");
   expect_invalid([&] { make([](auto& o) { o.initial_point = {1e9, 2.0}; }); }, "initial_point");
+  expect_invalid([&] { make([](auto& o) { o.further_starts = {{1e9}, {1e9, 2.0}}; }); }, "further_starts[1] has 2 values");
+  expect_invalid([&] { make([](auto& o) { o.further_starts = {{std::nan("")}}; }); }, "further_starts[0][0] = nan");
   expect_invalid([&] { make_optimiser(ParameterSpace().add("kn", 2.0, 1.0), OptimiserOptions{}); }, "'kn'");
   expect_invalid([&] { make_polisher(space, Eigen::VectorXd::Constant(1, 1e9), PolishOptions{"GN_FOO"}); }, "GN_FOO");
 }

@@ -892,6 +892,40 @@ TEST(Evidence, ACandidateWhoseProbesAllFailedStartsMidRange) {
   EXPECT_NEAR(unprobed[2], 1e-4, 1e-16);  // the log scale's middle
 }
 
+// The further starts of a candidate's search: the best base sets of other regions, best first,
+// each at least the separation (unit cube) from the base best and from every one taken; failed
+// runs and sets lacking a parameter are left out.
+TEST(Evidence, FurtherStartsAreTheBestBaseSetsOfOtherRegions) {
+  optimise::ParameterSpace space;
+  space.add("kn", 1e8, 1e10, optimise::ParameterSpec::Scale::log10).add("friction_deg", 25, 45);
+  const std::map<std::string, double> best = {{"kn", 1e10}, {"friction_deg", 35}};
+  const auto set = [](double kn, double friction, double fitness) {
+    ParameterSet s;
+    s.params = {{"kn", kn}, {"friction_deg", friction}};
+    s.fitness = fitness;
+    return s;
+  };
+  std::vector<ParameterSet> runs = {
+      set(1e10, 35, 1.0),                           // the best itself
+      set(8e9, 36, 1.1),                            // beside it (0.05 in kn, 0.05 in friction)
+      set(1e9, 35, 1.5),                            // half the log range away
+      set(1.2e9, 35.5, 1.4),                        // beside the one above, and better
+      set(1e8, 25, std::nan("")),                   // failed
+      set(1e8, 45, 3.0),                            // far from all
+  };
+  ParameterSet partial;
+  partial.params = {{"kn", 1e8}};
+  partial.fitness = 0.5;
+  runs.push_back(partial);
+  const auto starts = further_start_sets(best, runs, space, 5, 0.25);
+  ASSERT_EQ(starts.size(), 2u);
+  EXPECT_EQ(starts[0].at("kn"), 1.2e9);
+  EXPECT_EQ(starts[1].at("friction_deg"), 45);
+  EXPECT_EQ(further_start_sets(best, runs, space, 1, 0.25).size(), 1u);
+  EXPECT_TRUE(further_start_sets(best, runs, space, 0, 0.25).empty());
+  EXPECT_EQ(further_start_sets(best, runs, space, 5, 0.01).size(), 4u);  // every finite complete set but the best
+}
+
 // Where the base response splits, step 4 does not prune by signature: on the goal study's
 // joint-closure seed 2 (docs/journal/diagnose-studies.md) joint closure ranked fifth of seven (12 %) and was left
 // untried, while its calibration alone fits the measurement to the noise (235 -> 62 N).

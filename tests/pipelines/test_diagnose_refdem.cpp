@@ -2,8 +2,8 @@
 // contact discretisation, damping and effect laws than the engine that calibrates them, as measured
 // data are. The control needs no effect; a compliant right abutment is named there, with its
 // stiffness and its bounds, every stage of the loop checked on the way. Shortened searches (the
-// campaign's base 30 runs, 30 per candidate, two candidates) keep each within 100 s; the full
-// table over every record is a benchmark (scripts/refdem_table.py, docs/diagnose.md). Each runs on
+// campaign's base 30 runs, two candidates, no further search) keep each within three minutes; the
+// full table over every record is a benchmark (scripts/refdem_table.py, docs/diagnose.md). Each runs on
 // the round-off realisation DEMCAL_TEST_REALISATION names.
 #include "demcal/pipelines/diagnose.hpp"
 #include "test_support.hpp"
@@ -90,12 +90,15 @@ TEST_P(RefdemRecord, TheControlNeedsNoEffect) {
 // left), its horizontal stiffness within a factor 2 of the truth and inside what its bounds do not
 // rule out, the error lowered, the choice reached by most resamples, and the base re-fitted from
 // its fit without it clearly worse (the removal check). (The base friction is not compared with
-// the other code's: the two codes' friction laws differ, and the fits end at 40-45°.)
+// the other code's: the two codes' friction laws differ, and the fits end at 40-45°.) The candidates
+// search with the default budget: the gap at a hinge, its search started from other base fits too,
+// ties the support at 30 or 40 runs each (61 against 73 N, 73 against 76 N) and falls behind at 80.
 TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   const fs::path dir = test_support::fresh_dir("diagnose", "refdem-support-" + GetParam().name());
   constexpr double kx_truth = 2e6;
-  const Diagnosis d = run_diagnosis(record_campaign("A-support-1", dir, GetParam()),
-                                    shortened(dir, {"support-compliance", "joint-gap"}, true, true));
+  DiagnoseOptions options = shortened(dir, {"support-compliance", "joint-gap"}, true, true);
+  options.candidate_simulations = DiagnoseOptions{}.candidate_simulations;
+  const Diagnosis d = run_diagnosis(record_campaign("A-support-1", dir, GetParam()), options);
   ASSERT_EQ(d.candidates.size(), 2u);
   EXPECT_GE(d.candidates[0].signature_score, d.candidates[1].signature_score);  // ranked
   for (const auto& c : d.candidates) {
@@ -127,7 +130,10 @@ TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   // each of the effect's parameters checked, the truth inside what the check does not rule out
   ASSERT_EQ(c->bounds.size(), 3u);
   for (const ParameterBound& b : c->bounds) {
-    EXPECT_GE(b.trials.size(), 3u) << b.name;
+    // four values around the best, those beyond the search range left out: at least three, two
+    // where the best is at an end of the range
+    const auto [range_lower, range_upper] = c->search_ranges.at(b.name);
+    EXPECT_GE(b.trials.size(), b.best == range_lower || b.best == range_upper ? 2u : 3u) << b.name;
     EXPECT_EQ(b.best, c->params.at(b.name));
     if (b.name != "abutment_right.support_kx") continue;
     if (std::isfinite(b.lower)) {
@@ -146,6 +152,8 @@ TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   const json j = test_support::read_json(dir / "out" / "diagnosis.json");
   for (const char* key : {"base", "noise", "effective_points", "candidates", "chosen", "error_before", "error_after"})
     EXPECT_TRUE(j.contains(key)) << key;
+  ASSERT_EQ(j["base"]["further_starts"].size(), d.further_starts.size());
+  EXPECT_LE(d.further_starts.size(), static_cast<std::size_t>(DiagnoseOptions{}.candidate_starts - 1));
   EXPECT_EQ(j["frequency"]["verdict"].get<double>(), d.frequency.verdict);
   // the advice of a longer search in words and as a number, or neither
   ASSERT_TRUE(j.contains("advised_candidate_simulations"));

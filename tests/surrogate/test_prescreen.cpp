@@ -161,6 +161,34 @@ TEST(BayesOptimiser, StartsItsDesignAtTheGivenPoint) {
   for (std::size_t i = 1; i < batch.size(); ++i) EXPECT_EQ(batch[i], other[i]);  // the rest is unchanged
 }
 
+// Further starts follow the given point as the design's next points; the rest of the design is
+// the one it would have been.
+TEST(BayesOptimiser, FurtherStartsAreTheDesignsNextPoints) {
+  const Problem problem;
+  const auto space = space_of(problem.f);
+  optimise::OptimiserOptions o = design_of_ten();
+  const auto at = [&](double u) {
+    const Eigen::VectorXd x = space.to_physical(Eigen::VectorXd::Constant(space.dimension(), u));
+    return std::vector<double>(x.data(), x.data() + x.size());
+  };
+  o.initial_point = at(0.3);
+  o.further_starts = {at(0.7), at(0.9)};
+  const auto batch = make_bayes_optimiser(space, o, gp_kind())->ask();
+  ASSERT_EQ(batch.size(), 10u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const std::vector<double> want = i == 0 ? o.initial_point : o.further_starts[i - 1];
+    for (std::size_t k = 0; k < want.size(); ++k) EXPECT_NEAR(batch[i][static_cast<Eigen::Index>(k)], want[k], 1e-9 * std::abs(want[k]));
+  }
+  auto plain = o;
+  plain.further_starts.clear();
+  const auto other = make_bayes_optimiser(space, plain, gp_kind())->ask();
+  for (std::size_t i = 3; i < batch.size(); ++i) EXPECT_EQ(batch[i], other[i]);
+  // more starts than the design has points: the design grows to hold them all
+  o.further_starts.assign(12, at(0.5));
+  o.max_evaluations = 40;
+  EXPECT_EQ(make_bayes_optimiser(space, o, gp_kind())->ask().size(), 13u);
+}
+
 // Known runs (warm rows) take the place of the design points within half the design's spacing of
 // them, 0.5 n^(-1/d): runs clustered at one set replace the points beside it only, spread runs the
 // whole design.

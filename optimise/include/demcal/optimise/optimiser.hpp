@@ -149,6 +149,9 @@ struct OptimiserOptions {
   // NLopt.
   std::vector<double> initial_point;   // physical start for NLopt (empty = centre of the cube); for
                                        // `bo` (surrogate/) the first point of its initial design
+  // `bo` only: further given points of its initial design, after initial_point (physical, each of
+  // the space's dimension): starts in other basins than initial_point's. Ignored by the others.
+  std::vector<std::vector<double>> further_starts;
   double initial_step = 0.0;           // NLopt initial step in unit-cube lengths (0 = NLopt default)
   int nlopt_population = 0;            // NLopt's own population (CRS2, ISRES, ESCH); 0 = its default
   double xtol_rel = 0.0;               // NLopt stopping tolerances (0 = off); the budget always holds

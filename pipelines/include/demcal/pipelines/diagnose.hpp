@@ -282,6 +282,14 @@ struct DiagnoseOptions {
   // (0, 0.5]) or a swarm ("tbpso", "pso", "ga") over the box.
   std::string candidate_algorithm = "bo";
   double candidate_initial_step = 0.1;
+  // --candidate-starts: points of each candidate's search design ("bo") that start from a base
+  // fit, >= 1: the base best, then the best base sets of other regions (further_start_sets, at
+  // least `start_separation` apart in the unit cube of the base parameters, in (0, 1]). Where the
+  // base objective is flat along a parameter, its best set is one of many the data allow, each
+  // compensating for the missing effect differently; the extended model's valley may lie beside
+  // another of them.
+  int candidate_starts = 3;
+  double start_separation = 0.25;
   // --surrogate-kind: "gp" | "mlp", whatever the campaign's. "mlp" models the curves, so its
   // searches find the narrow valley a change of mechanism makes in the objective.
   std::string surrogate_kind = "mlp";
@@ -407,6 +415,10 @@ struct Diagnosis {
   std::string message;
   std::map<std::string, double> base_params;
   double base_fitness = kNaN;
+  // Where the candidates' searches start besides the base best (further_start_sets; diagnosis.json
+  // base.further_starts): the best base sets of other regions; of a further step (with an effect
+  // added), those of the added effect's searches.
+  std::vector<std::map<std::string, double>> further_starts;
   std::map<std::string, double> base_rms;  // "<case>/<channel>" -> N
   // The overall error of the base best set and of its re-runs (DiagnoseOptions::scatter_runs); like
   // a candidate, the base is judged on the run of median error: base_rms, base_residuals and
@@ -525,6 +537,15 @@ int candidates_to_calibrate(bool splits, const DiagnoseOptions& options);
 // (an effect none of whose probes could be scored), clipped to the box.
 std::vector<double> candidate_start(const optimise::ParameterSpace& space, const std::map<std::string, double>& warm,
                                     const std::map<std::string, double>& best);
+
+// The further starts of a candidate's search (DiagnoseOptions::candidate_starts): of `runs` (the
+// base calibrations' sets; those of non-finite fitness or lacking a free parameter left out), in
+// order of fitness, each set whose distance in the unit cube of `space`'s free parameters from
+// `best` and from every set already taken is at least `separation`; at most `count`.
+std::vector<std::map<std::string, double>> further_start_sets(const std::map<std::string, double>& best,
+                                                              const std::vector<ParameterSet>& runs,
+                                                              const optimise::ParameterSpace& space, int count,
+                                                              double separation);
 
 // A sentence for the verdict when the base fit's re-runs scatter by more than
 // options.scatter_floor_ratio x the noise: the fit sits where the model's response splits, the

@@ -239,8 +239,8 @@ CrossValidation cross_validate(const std::vector<TrainingRow>& rows, const Surro
                                const CurveHooks& hooks = {});
 
 // "bo": Bayesian optimisation behind the ask/tell interface (see the header comment). The initial
-// design is a Latin hypercube of max(options.min_runs, population) points, its first the given
-// initial point, less every point with a warm row within half the design's spacing of it
+// design is a Latin hypercube of max(options.min_runs, population, given starts) points, its first
+// the given initial point and further starts (OptimiserOptions::further_starts), less every point with a warm row within half the design's spacing of it
 // (0.5 n^(-1/d) in the unit cube): clustered warm rows replace the points beside them, spread ones
 // the whole design; then rounds of `batch` points
 // (SurrogateOptions::batch, at least 1): each point the maximum of the acquisition, locally
