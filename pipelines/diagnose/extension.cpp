@@ -68,16 +68,15 @@ std::vector<std::map<std::string, double>> further_start_sets(const std::map<std
     }
     return space.to_unit(x).cwiseMax(0.0).cwiseMin(1.0);
   };
-  std::vector<const ParameterSet*> ranked;
+  std::vector<std::pair<const ParameterSet*, Eigen::VectorXd>> ranked;  // each usable run and its unit point
   for (const auto& r : runs)
-    if (std::isfinite(r.fitness) && unit(r.params)) ranked.push_back(&r);
-  std::stable_sort(ranked.begin(), ranked.end(), [](const ParameterSet* a, const ParameterSet* b) { return a->fitness < b->fitness; });
+    if (const auto x = unit(r.params); x && std::isfinite(r.fitness)) ranked.emplace_back(&r, *x);
+  std::stable_sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first->fitness < b.first->fitness; });
   std::vector<Eigen::VectorXd> taken;
   if (const auto b = unit(best)) taken.push_back(*b);
   std::vector<std::map<std::string, double>> starts;
-  for (const ParameterSet* r : ranked) {
+  for (const auto& [r, x] : ranked) {
     if (static_cast<int>(starts.size()) >= count) break;
-    const Eigen::VectorXd x = *unit(r->params);
     if (std::all_of(taken.begin(), taken.end(), [&](const Eigen::VectorXd& t) { return (x - t).norm() >= separation; })) {
       taken.push_back(x);
       starts.push_back(r->params);

@@ -106,8 +106,12 @@ class BayesOptimiser final : public optimise::Optimiser {
     const int d = space.dimension();
     for (const auto& r : warm_)
       if (r.unit.size() != d) throw std::invalid_argument("bo: a warm row has the wrong dimension");
-    const long given = (options.initial_point.empty() ? 0 : 1) + static_cast<long>(options.further_starts.size());
-    const long wanted = std::max<long>({surrogate_.min_runs, options.population, given});
+    // Given starts are the design's first points: a warm start from a known good set, then the
+    // further starts (other basins).
+    std::vector<const std::vector<double>*> starts;
+    if (!options.initial_point.empty()) starts.push_back(&options.initial_point);
+    for (const auto& s : options.further_starts) starts.push_back(&s);
+    const long wanted = std::max<long>({surrogate_.min_runs, options.population, static_cast<long>(starts.size())});
     // Latin hypercube: one point per stratum of every coordinate, strata permuted per coordinate.
     std::mt19937_64 rng = seeded_rng(options.seed);
     Eigen::MatrixXd lhs(wanted, d);
@@ -118,11 +122,6 @@ class BayesOptimiser final : public optimise::Optimiser {
       for (long i = 0; i < wanted; ++i)
         lhs(i, k) = (static_cast<double>(perm[static_cast<size_t>(i)]) + uniform01(rng)) / static_cast<double>(wanted);
     }
-    // Given starts are the design's first points: a warm start from a known good set, then the
-    // further starts (other basins).
-    std::vector<const std::vector<double>*> starts;
-    if (!options.initial_point.empty()) starts.push_back(&options.initial_point);
-    for (const auto& s : options.further_starts) starts.push_back(&s);
     for (size_t i = 0; i < starts.size(); ++i)
       lhs.row(static_cast<Eigen::Index>(i)) = space.to_unit(Eigen::Map<const Eigen::VectorXd>(starts[i]->data(), d))
                                                   .cwiseMax(0.0).cwiseMin(1.0).transpose();
