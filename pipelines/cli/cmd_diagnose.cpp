@@ -17,7 +17,8 @@ struct DiagnoseFlags {
   std::string campaign_file;
   std::string effects = "all";
   std::string held_out;
-  bool no_report = false, quiet = false, no_bounds = false, no_removal_check = false;
+  bool no_report = false, quiet = false, no_bounds = false, no_removal_check = false,
+       no_tentative_effect = false;
 };
 
 // Names separated by commas, each trimmed of spaces; "all" or "" = none (every effect, for
@@ -44,6 +45,7 @@ void run(const DiagnoseFlags& f) {
   o.report = !f.no_report;
   o.parameter_bounds = !f.no_bounds;
   o.removal_check = !f.no_removal_check;
+  o.tentative_effect = !f.no_tentative_effect;
   o.progress = !f.quiet;
   const Diagnosis d = run_diagnosis(config, o);
   std::cout << d.headline << "\n  - " << d.conclusion << "\n";
@@ -117,6 +119,8 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   sub->add_flag("--no-removal-check", flags->no_removal_check,
                 "Skip the removal check: each effect added re-fitted without (the base alone for one), and dropped when that costs no evidence");
+  sub->add_flag("--no-tentative-effect", flags->no_tentative_effect,
+                "Where no effect passes alone, do not add the best one tentatively to look for a second that passes with it");
   sub->add_option("--max-effects", o.max_effects,
                   "Effects added at most: after one is accepted the model with it is diagnosed again, until none passes (0 = no limit)")
       ->capture_default_str();

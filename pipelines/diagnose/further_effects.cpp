@@ -16,23 +16,23 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Diagnosis::AddedEffect added_effect(const DiagnosisRun& run, const std::string& folder) {
-  const EffectCandidate& c = *chosen_candidate(run.d);
+Diagnosis::AddedEffect added_effect(const DiagnosisRun& run, const EffectCandidate& c, const std::string& folder,
+                                    bool tentative) {
   return {c.effect, c.target, fitted_effect_parameters(c, run.d), run.d.error_before, c.error, folder,
-          run.d.frequency.verdict};
+          tentative ? Diagnosis::kNaN : run.d.frequency.verdict, tentative};
 }
 
-// The next step: the model of `run`'s chosen effect as the base, its fit as the base fit, the
+// The next step: the model of `c` (an effect of `run`) as the base, its fit as the base fit, the
 // effects in neither model as the candidates; null when no effect is left or the budget is spent.
-std::unique_ptr<DiagnosisRun> next_step(const DiagnosisRun& run, const std::vector<std::string>& in_model,
-                                        const fs::path& folder) {
-  const EffectCandidate& c = *chosen_candidate(run.d);
+std::unique_ptr<DiagnosisRun> next_step(const DiagnosisRun& run, const EffectCandidate& c,
+                                        const std::vector<std::string>& in_model, const fs::path& folder) {
   const ExtendedModel& m = run.models.at(c.effect);
   const auto& best = run.best_sets.at(c.effect);
   DiagnoseOptions options = run.options;
   options.out = folder.string();
   options.result.clear();
   options.effects.clear();
+  options.tentative_effect = false;  // a tentative effect is the first step's alone
   for (const auto* e : run.effects)
     if (std::find(in_model.begin(), in_model.end(), e->name) == in_model.end()) options.effects.push_back(e->name);
   if (options.effects.empty()) return nullptr;
@@ -198,38 +198,54 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
 
 void add_further_effects(DiagnosisRun& run) {
   Diagnosis& d = run.d;
-  if (d.outcome != DiagnosisOutcome::missing_effect) return;
-  d.added = {added_effect(run, "")};
-  std::vector<std::string> in_model = {d.chosen.front()};
+  const EffectCandidate* adding = chosen_candidate(d);
+  const bool tentative = adding == nullptr;
+  if (tentative) {
+    const std::string name = tentative_effect(d, run.options);
+    if (name.empty() || !run.models.count(name) || !run.best_sets.count(name)) return;
+    adding = &*std::find_if(d.candidates.begin(), d.candidates.end(), [&](const auto& c) { return c.effect == name; });
+  }
+  std::vector<std::string> in_model = {adding->effect};
+  std::vector<Diagnosis::AddedEffect> added = {added_effect(run, *adding, "", tentative)};
   std::vector<std::unique_ptr<DiagnosisRun>> steps;  // each step's models stay for the next
   const DiagnosisRun* last = &run;
   while (run.options.max_effects == 0 || static_cast<int>(in_model.size()) < run.options.max_effects) {
     std::string name;
     for (const auto& e : in_model) name += (name.empty() ? "with-" : "+") + e;
     const fs::path folder = fs::path(run.options.out) / name;
-    auto next = next_step(*last, in_model, folder);
+    auto next = next_step(*last, *adding, in_model, folder);
     if (!next) break;
     const auto start = std::chrono::steady_clock::now();
-    progress(run.options, "the model with " + in_model.back() + " is the new base: diagnosing it for a further effect in " +
-                              folder.string());
+    progress(run.options, "the model with " + in_model.back() + " is the new base" +
+                              (steps.empty() && tentative ? " (tentatively: no effect passed alone)" : "") +
+                              ": diagnosing it for a further effect in " + folder.string());
     diagnose_from_base(*next);
     finish_diagnosis(*next, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     run.runner.add_runs_of(next->runner);
     const Diagnosis& step = next->d;
+    const std::string with = " With " + in_model.back() + " added" +
+                             (steps.empty() && tentative ? " tentatively (it lowers the error to " +
+                                                               format_number(adding->error, 3) + " N, criterion change " +
+                                                               format_number(adding->score, 3) + ", short of passing alone)"
+                                                         : "") +
+                             ", the diagnosis ran again on the extended model (" + folder.string() + "): ";
     if (step.outcome != DiagnosisOutcome::missing_effect) {
-      add_note(d, " With " + in_model.back() + " added, the diagnosis ran again on the extended model (" +
-                      folder.string() + "): " + step.headline);
+      add_note(d, with + step.headline);
       break;
     }
-    d.added.push_back(added_effect(*next, folder.string()));
-    add_note(d, " With " + in_model.back() + " added, the diagnosis ran again on the extended model (" +
-                    folder.string() + "): " + step.conclusion);
+    added.push_back(added_effect(*next, *chosen_candidate(step), folder.string(), false));
+    add_note(d, with + step.conclusion);
     in_model.push_back(step.chosen.front());
-    d.chosen.push_back(step.chosen.front());
-    d.error_after = step.error_after;
+    adding = chosen_candidate(step);
     last = next.get();
     steps.push_back(std::move(next));
   }
+  // a tentative effect stays only with a further one that passes beside it
+  if (tentative && added.size() < 2) return;
+  d.added = added;
+  d.chosen = in_model;
+  d.outcome = DiagnosisOutcome::missing_effect;
+  if (!steps.empty()) d.error_after = steps.back()->d.error_after;
   std::vector<const DiagnosisRun*> chain = {&run};
   for (const auto& step : steps) chain.push_back(step.get());
   if (d.added.size() > 1) {
@@ -241,7 +257,8 @@ void add_further_effects(DiagnosisRun& run) {
     }
     d.headline = "Missing " + std::to_string(d.added.size()) + " effects: " + effects + "; force error " + errors +
                  " N against " + format_number(run.noise, 3) + " N of noise" +
-                 (shares.empty() ? "" : "; each step's choice reached by " + shares + " of its resamples") + ".";
+                 (shares.empty() ? "" : "; each step's choice reached by " + shares + " of its resamples") +
+                 (tentative ? "; " + d.added.front().effect + " added tentatively (it did not pass alone)" : "") + ".";
   }
   if (run.options.removal_check) check_removals(run, chain);
 }

@@ -270,6 +270,18 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const 
   return names;
 }
 
+std::string tentative_effect(const Diagnosis& d, const DiagnoseOptions& options) {
+  if (!options.tentative_effect || !options.removal_check || options.max_effects == 1 ||
+      d.outcome != DiagnosisOutcome::unexplained)
+    return "";
+  const EffectCandidate* best = nullptr;
+  for (const auto& c : d.candidates) {
+    if (!c.tried || !(c.score < 0) || !(c.error < d.error_before) || check_held_out(c, d, options).spoils) continue;
+    if (best == nullptr || c.score < best->score) best = &c;
+  }
+  return best == nullptr ? "" : best->effect;
+}
+
 double error_floor(double noise, double scatter, const DiagnoseOptions& options) {
   if (!std::isfinite(scatter)) return noise;
   return std::hypot(noise, std::min(scatter, options.scatter_floor_ratio * noise));

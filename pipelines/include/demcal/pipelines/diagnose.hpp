@@ -310,6 +310,13 @@ struct DiagnoseOptions {
   // without (the model with the others; the base alone for one, `candidate_simulations` runs each)
   // and dropped when its removal costs no evidence (Diagnosis::removal_checks).
   bool removal_check = true;
+  // --no-tentative-effect sets false: where no effect passes alone and the base fit misses the
+  // curves (outcome "unexplained"), the candidate of lowest criterion that lowers the error is added
+  // tentatively and its model diagnosed again (step 8). When a further effect passes there, both are
+  // kept, and the removal check (which it needs: off with --no-removal-check) re-fits each without
+  // the other; else the verdict stays "no effect found". Two effects that each explain part of the
+  // residual may pass only together: each alone is searched from a base that compensates for both.
+  bool tentative_effect = true;
   // --continued-simulations: a further search (ContinuedSearch) of each fit left above the floor
   // where the selection leaves the residual unexplained: the accepted effect, then, while no fit
   // explains the curves, the contenders. -1: a candidate's budget; 0: none.
@@ -442,7 +449,8 @@ struct Diagnosis {
     double error_before = kNaN;    // N, of the model it was added to
     double error_after = kNaN;     // N, of its fit
     std::string folder;            // "" for the first (this diagnosis's own folder)
-    double frequency = kNaN;       // its step's VerdictFrequency::verdict
+    double frequency = kNaN;       // its step's VerdictFrequency::verdict (NaN: added tentatively)
+    bool tentative = false;        // added without passing alone (DiagnoseOptions::tentative_effect)
   };
   std::vector<AddedEffect> added;
   // Each effect added, its removal check (removal_criteria): the model with the others (the base
@@ -624,6 +632,13 @@ bool settle_on_frequency(Diagnosis& diagnosis, const DiagnoseOptions& options);
 //   effort: the truth of an effect can be a valley its first search missed (docs/diagnose.md).
 // A candidate already searched further (continued.simulations > 0) is not named again.
 std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis, const DiagnoseOptions& options);
+
+// Step 8 where no effect passes (DiagnoseOptions::tentative_effect): the effect added tentatively,
+// the tried candidate of lowest criterion among those whose criterion falls and whose fit lowers the
+// error without spoiling the held-out data; "" when none does, when the outcome is not
+// "unexplained" (no effect needed: nothing to look for; a tie: the data already disagree) or when
+// the options rule it out (tentative_effect or removal_check off, max_effects 1).
+std::string tentative_effect(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
 // A sentence for the verdict when the chosen effect's fit, after any further search, still misses
 // the curves by more than the level at which the loop calls a fit explained (noise_level_ratio x
