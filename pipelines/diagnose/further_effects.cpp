@@ -205,6 +205,7 @@ void add_further_effects(DiagnosisRun& run) {
     if (name.empty() || !run.models.count(name) || !run.best_sets.count(name)) return;
     adding = &*std::find_if(d.candidates.begin(), d.candidates.end(), [&](const auto& c) { return c.effect == name; });
   }
+  const EffectCandidate* const first = adding;
   std::vector<std::string> in_model = {adding->effect};
   std::vector<Diagnosis::AddedEffect> added = {added_effect(run, *adding, "", tentative)};
   std::vector<std::unique_ptr<DiagnosisRun>> steps;  // each step's models stay for the next
@@ -242,6 +243,12 @@ void add_further_effects(DiagnosisRun& run) {
   }
   // a tentative effect stays only with a further one that passes beside it
   if (tentative && added.size() < 2) return;
+  if (tentative) {
+    // never bounded alone: its parameters as the fit with the effect beside it has them
+    EffectCandidate with_all = *first;
+    with_all.params = adding->params;
+    added.front().parameters = fitted_effect_parameters(with_all, run.d);
+  }
   d.added = added;
   d.chosen = in_model;
   d.outcome = DiagnosisOutcome::missing_effect;
