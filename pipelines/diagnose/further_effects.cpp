@@ -216,16 +216,17 @@ void add_further_effects(DiagnosisRun& run) {
     const fs::path folder = fs::path(run.options.out) / name;
     auto next = next_step(*last, *adding, in_model, folder);
     if (!next) break;
+    const bool from_tentative = steps.empty() && tentative;
     const auto start = std::chrono::steady_clock::now();
     progress(run.options, "the model with " + in_model.back() + " is the new base" +
-                              (steps.empty() && tentative ? " (tentatively: no effect passed alone)" : "") +
+                              (from_tentative ? " (tentatively: no effect passed alone)" : "") +
                               ": diagnosing it for a further effect in " + folder.string());
     diagnose_from_base(*next);
     finish_diagnosis(*next, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     run.runner.add_runs_of(next->runner);
     const Diagnosis& step = next->d;
     const std::string with = " With " + in_model.back() + " added" +
-                             (steps.empty() && tentative ? " tentatively (it lowers the error to " +
+                             (from_tentative ? " tentatively (it lowers the error to " +
                                                                format_number(adding->error, 3) + " N, criterion change " +
                                                                format_number(adding->score, 3) + ", short of passing alone)"
                                                          : "") +
@@ -241,9 +242,8 @@ void add_further_effects(DiagnosisRun& run) {
     last = next.get();
     steps.push_back(std::move(next));
   }
-  // a tentative effect stays only with a further one that passes beside it
-  if (tentative && added.size() < 2) return;
   if (tentative) {
+    if (added.size() < 2) return;  // it stays only with a further effect that passes beside it
     // never bounded alone: its parameters as the fit with the effect beside it has them
     EffectCandidate with_all = *first;
     with_all.params = adding->params;
