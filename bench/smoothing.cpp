@@ -1,6 +1,7 @@
 // Smoothing benchmarks: the neural smoother (one curve, twenty curves batched; both backends),
-// objective 1 and 2, reading a lab curve. `bench_smoothing --comparison` prints instead the table of
-// smoothers against the synthetic truth (docs/smoothing.md).
+// objective 1 and 2 (ten runs batched; one run, its channels on one or two threads), reading a lab
+// curve. `bench_smoothing --comparison` prints instead the table of smoothers against the synthetic
+// truth (docs/smoothing.md).
 #include "demcal/smoothing/smoothing.hpp"
 
 #include <benchmark/benchmark.h>
@@ -58,6 +59,18 @@ void BM_Objective2TenParticles(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(objective.evaluate_batch(sims));
 }
 BENCHMARK(BM_Objective2TenParticles)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+
+// One run's objective 2 (two channels), its channels trained one after another (1) or side by side
+// (2, the campaign's fitness workers on two cores): the latency of a round's last run.
+void BM_Objective2OneRun(benchmark::State& state) {
+  const auto family = synthetic_family(2, 7);
+  SmootherOptions smoother;
+  smoother.curve_threads = static_cast<int>(state.range(0));
+  const Objective2 objective(two_channel_curve(family[0], "e"), {}, smoother);
+  const Curve run = two_channel_curve(family[1], "s");
+  for (auto _ : state) benchmark::DoNotOptimize(objective.evaluate(run));
+}
+BENCHMARK(BM_Objective2OneRun)->Arg(1)->Arg(2)->ArgName("curve_threads")->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
 
 void BM_ReadLabCurve(benchmark::State& state) {
   const std::string path = std::string(DEMCAL_SOURCE_DIR) +

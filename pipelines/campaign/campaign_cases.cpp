@@ -89,9 +89,15 @@ PreparedCases prepare_cases(const CampaignConfig& config) {
                             "' has fewer than 2 loading points (rows whose displacement and force are finite and whose "
                             "displacement exceeds every earlier one): no simulation can be compared with it; leave the "
                             "column out of the measured data");
-    if (config.objective == 2)
-      p.objective2.push_back(
-          std::make_unique<smoothing::Objective2>(p.measured.back(), config.objective_options, config.smoother));
+    if (config.objective == 2) {
+      // A run's channels smoothed side by side on the fitness workers' threads: the last run of a
+      // round is then scored while no simulation is left to fill the other cores (the same values).
+      smoothing::SmootherOptions smoother = config.smoother;
+      const int workers = config.backend.fitness_threads > 0 ? config.backend.fitness_threads : hardware_threads();
+      const auto channels = smoothing::displacement_columns(p.measured.back(), config.objective_options).size();
+      smoother.curve_threads = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(workers), channels));
+      p.objective2.push_back(std::make_unique<smoothing::Objective2>(p.measured.back(), config.objective_options, smoother));
+    }
   }
   if (config.backend.type != "command") p.scenes = build_scenes(config);
   return p;

@@ -6,7 +6,11 @@
 #include "mlp_training.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <exception>
+#include <thread>
+#include <vector>
 
 namespace demcal::smoothing::detail {
 
@@ -139,8 +143,27 @@ void train_curve(const TrainingBatch& tb, const SmootherOptions& options, std::i
 }  // namespace
 
 TrainingOutput train_native(const TrainingBatch& tb, const SmootherOptions& options) {
-  CheckpointSelector selector(tb, options);
-  for (std::int64_t c = 0; c < tb.curves; ++c) train_curve(tb, options, c, &selector);
+  CheckpointSelector selector(tb, options);  // writes only curve c's slots for curve c
+  const std::int64_t threads = std::min<std::int64_t>(options.curve_threads, tb.curves);
+  if (threads <= 1) {
+    for (std::int64_t c = 0; c < tb.curves; ++c) train_curve(tb, options, c, &selector);
+    return selector.result();
+  }
+  std::atomic<std::int64_t> next{0};
+  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(threads));
+  const auto work = [&](std::size_t worker) {
+    try {
+      for (std::int64_t c; (c = next++) < tb.curves;) train_curve(tb, options, c, &selector);
+    } catch (...) {
+      errors[worker] = std::current_exception();
+    }
+  };
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < errors.size(); ++t) pool.emplace_back(work, t);
+  work(0);
+  for (auto& t : pool) t.join();
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
   return selector.result();
 }
 

@@ -82,6 +82,7 @@ void SmootherOptions::Validate() const {
   if (!(final_learning_rate > 0) || final_learning_rate > learning_rate)
     fail("final_learning_rate", final_learning_rate, "must be in (0, learning_rate]");
   if (threads < 1) fail("threads", threads, "must be >= 1");
+  if (curve_threads < 1) fail("curve_threads", curve_threads, "must be >= 1");
   if (check_interval < 1) fail("check_interval", check_interval, "must be >= 1");
   if (trend_cutoff < 1 || trend_cutoff > points - 2)
     fail("trend_cutoff", trend_cutoff, "must be in [1, points - 2]");
@@ -90,6 +91,7 @@ void SmootherOptions::Validate() const {
   limits::require_within(limits::Limit::curve_points, points, "SmootherOptions.points");
   limits::require_within(limits::Limit::epochs, epochs, "SmootherOptions.epochs");
   limits::require_within(limits::Limit::workers, threads, "SmootherOptions.threads");
+  limits::require_within(limits::Limit::workers, curve_threads, "SmootherOptions.curve_threads");
   limits::require_within(limits::Limit::network_weights, 1.0 * hidden_width * hidden_width * hidden_layers,
                          "SmootherOptions.hidden_layers x hidden_width^2");
 }

@@ -188,6 +188,16 @@ TEST(NeuralSmoother, DeterministicAndIndependentOfTheBatch) {
     const auto batch = smooth_batch({family[0].noisy, family[1].noisy, family[2].noisy}, o);
     const auto again = smooth_batch({family[0].noisy, family[1].noisy, family[2].noisy}, o);
     const auto alone = smooth_batch({family[1].noisy}, o);
+    SmootherOptions side_by_side = o;  // native: the curves on two and on three threads
+    side_by_side.curve_threads = 2;
+    const auto on_two = smooth_batch({family[0].noisy, family[1].noisy, family[2].noisy}, side_by_side);
+    side_by_side.curve_threads = 3;
+    const auto on_three = smooth_batch({family[0].noisy, family[1].noisy, family[2].noisy}, side_by_side);
+    for (std::size_t c = 0; c < 3; ++c) {
+      EXPECT_EQ(on_two[c].smoothed.y, batch[c].smoothed.y) << to_string(backend) << " curve " << c;
+      EXPECT_EQ(on_three[c].smoothed.y, batch[c].smoothed.y) << to_string(backend) << " curve " << c;
+      EXPECT_EQ(on_three[c].epochs_trained, batch[c].epochs_trained);
+    }
     for (std::size_t k = 0; k < 200; ++k) {
       EXPECT_EQ(batch[1].smoothed.y[k], again[1].smoothed.y[k]) << to_string(backend);
       if (backend == SmootherBackend::native)
@@ -224,6 +234,9 @@ TEST(NeuralSmoother, ReportsUnfittableCurvesAndBadOptions) {
   }
   o = {};
   o.check_interval = 0;
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
+  o = {};
+  o.curve_threads = 0;
   EXPECT_THROW(o.Validate(), std::invalid_argument);
   o = {};
   o.final_learning_rate = 1;

@@ -78,6 +78,11 @@ struct SmootherOptions {
   std::uint64_t seed = 1;              // initial weights
   SmootherBackend backend = SmootherBackend::native;
   int threads = 1;                     // LibTorch intra-op threads (libtorch backend; calling thread)
+  // Native backend: the curves of one batch trained side by side on up to this many threads. Each
+  // curve has its own network from the same initial weights, so the values are the same for any
+  // count; what changes is the wall time of a batch of few curves (a run's two channels) while
+  // cores are idle. >= 1.
+  int curve_threads = 1;
   // Throws std::invalid_argument naming the bad field and value.
   void Validate() const;
 };
