@@ -123,6 +123,11 @@ std::string effects_text(const std::vector<ModelEffect>& effects, const std::map
     EffectCandidate c;
     c.effect = e.effect->name;
     c.params = params;
+    // the ranges of the step that added it, where they hold the re-fitted value
+    for (const auto& b : e.fit->bounds) {
+      const auto value = params.find(b.name);
+      if (value != params.end() && !(value->second < b.lower) && !(value->second > b.upper)) c.bounds.push_back(b);
+    }
     text += (text.empty() ? "" : "; ") + c.effect + (e.targets.empty() ? "" : " at " + e.targets.front()) + ": " +
             fitted_effect_parameters(c, base);
   }
@@ -175,7 +180,7 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
   d.error_after = without[k].error;
   const std::string why = dropped.effect + " dropped again (its removal costs no evidence: criterion " +
                           format_number(criteria[k], 3) + ")";
-  const std::string against = " N against " + format_number(run.noise, 3) + " N of noise.";
+  const std::string against = " N against " + format_number(run.noise, 3) + " N of noise";
   if (kept.empty()) {
     // the base alone, re-fitted from the effect's fit, does as well: what the effect gained was
     // the base parameters' search, not the effect
@@ -184,11 +189,11 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
     d.headline = std::string(d.outcome == DiagnosisOutcome::unexplained ? "No effect found" : "No effect needed") +
                  ": the base model re-fitted from the " + dropped.effect + " fit reaches " +
                  format_number(d.error_after, 3) + " N, so " + why + "; force error " + errors + " → " +
-                 format_number(d.error_after, 3) + against;
+                 format_number(d.error_after, 3) + against + ".";
   } else {
     d.headline = std::string(kept.size() == 1 ? "Missing: " : "Missing " + std::to_string(kept.size()) + " effects: ") +
                  effects_text(kept, sets[k], run.d) + "; force error " + errors + " → " +
-                 format_number(d.error_after, 3) + " N with " + why + "," + against.substr(1);
+                 format_number(d.error_after, 3) + against + ", with " + why + ".";
   }
   add_note(d, " Removal check: " + why + "; the model without it, in " + dropped.folder + ", fits to " +
                   format_number(d.error_after, 3) + " N.");

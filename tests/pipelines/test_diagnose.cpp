@@ -1476,6 +1476,9 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
       EXPECT_EQ(d.error_after, r.error_without);
       EXPECT_NE(d.headline.find(r.effect + " dropped again"), std::string::npos) << d.headline;
     }
+    // one sentence: the error chain in newtons against the noise, then what the check dropped
+    EXPECT_NE(d.headline.find(" N against "), std::string::npos) << d.headline;
+    EXPECT_EQ(d.headline.back(), '.') << d.headline;
   } else {
     EXPECT_EQ(d.added.size(), 1u);
     EXPECT_NE(d.verdict.find("With " + first + " added, the diagnosis ran again"), std::string::npos) << d.verdict;
