@@ -30,6 +30,7 @@ using nlohmann::json;
 using detail::build_scenes;
 using detail::case_curve_grid;
 using detail::FitnessWorkers;
+using detail::fitness_thread_count;
 using detail::identifiability;
 using detail::make_backend;
 using detail::prepare_cases;
@@ -109,8 +110,7 @@ void score_earlier_runs(const CampaignConfig& config, const PreparedCases& prepa
     for (const auto& r : archive.unscored_runs(backend.model_hash(k), prepared.objective_keys[k]))
       if (outside_space(config.space, r.params).empty()) unscored.push_back({r.run_id, k});
   if (unscored.empty()) return;
-  FitnessWorkers workers(config.backend.fitness_threads > 0 ? config.backend.fitness_threads : hardware_threads(),
-                         prepared, config);
+  FitnessWorkers workers(fitness_thread_count(config), prepared, config);
   for (const auto& [id, k] : unscored) {
     auto run = archive.run(id);
     workers.submit(id, run->status, std::move(run->curves), k);
@@ -530,7 +530,7 @@ double tell_and_commit(const CampaignContext& ctx, CampaignOptimisers& optimiser
 SessionCounts run_iterations(const CampaignContext& ctx, CampaignOptimisers& optimisers, int first_iteration,
                              CampaignProgress& progress) {
   const auto& config = ctx.config;
-  const int fitness_threads = config.backend.fitness_threads > 0 ? config.backend.fitness_threads : hardware_threads();
+  const int fitness_threads = fitness_thread_count(config);
   SessionCounts counts;
   for (int iteration = first_iteration;; ++iteration) {
     optimise::Optimiser* asking = optimisers.active();

@@ -93,9 +93,8 @@ PreparedCases prepare_cases(const CampaignConfig& config) {
       // A run's channels smoothed side by side on the fitness workers' threads: the last run of a
       // round is then scored while no simulation is left to fill the other cores (the same values).
       smoothing::SmootherOptions smoother = config.smoother;
-      const int workers = config.backend.fitness_threads > 0 ? config.backend.fitness_threads : hardware_threads();
-      const auto channels = smoothing::displacement_columns(p.measured.back(), config.objective_options).size();
-      smoother.curve_threads = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(workers), channels));
+      smoother.curve_threads = static_cast<int>(
+          std::min<std::size_t>(static_cast<std::size_t>(fitness_thread_count(config)), ends.size()));  // ends: one per channel
       p.objective2.push_back(std::make_unique<smoothing::Objective2>(p.measured.back(), config.objective_options, smoother));
     }
   }
@@ -150,6 +149,10 @@ std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, co
     return make_mpi_backend(prepared.scenes);
   }
   return std::make_unique<ThreadBackend>(prepared.scenes, config.backend.threads);
+}
+
+int fitness_thread_count(const CampaignConfig& config) {
+  return config.backend.fitness_threads > 0 ? config.backend.fitness_threads : hardware_threads();
 }
 
 namespace {

@@ -47,6 +47,9 @@ std::unique_ptr<EvaluationBackend> make_backend(const CampaignConfig& config, co
 std::unique_ptr<CommandBackend> make_command_backend(const CampaignConfig& config, const std::string& work_root,
                                                      std::vector<std::string> parameter_names, int parallel);
 
+// The fitness workers' thread count: backend.fitness_threads, or every hardware thread when 0.
+int fitness_thread_count(const CampaignConfig& config);
+
 // Fitness jobs of one iteration on worker threads. Jobs are submitted as runs become available (from
 // the archive at once, simulated ones as each finishes), so the objective-2 smoothing of finished
 // runs overlaps the simulations still running. Each curve is smoothed by its own network, so a value

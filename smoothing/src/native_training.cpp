@@ -144,13 +144,9 @@ void train_curve(const TrainingBatch& tb, const SmootherOptions& options, std::i
 
 TrainingOutput train_native(const TrainingBatch& tb, const SmootherOptions& options) {
   CheckpointSelector selector(tb, options);  // writes only curve c's slots for curve c
-  const std::int64_t threads = std::min<std::int64_t>(options.curve_threads, tb.curves);
-  if (threads <= 1) {
-    for (std::int64_t c = 0; c < tb.curves; ++c) train_curve(tb, options, c, &selector);
-    return selector.result();
-  }
+  const std::int64_t threads = std::max<std::int64_t>(1, std::min<std::int64_t>(options.curve_threads, tb.curves));
   std::atomic<std::int64_t> next{0};
-  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(threads));
+  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(threads));  // one thread: the caller's alone
   const auto work = [&](std::size_t worker) {
     try {
       for (std::int64_t c; (c = next++) < tb.curves;) train_curve(tb, options, c, &selector);
