@@ -5,7 +5,7 @@ declared effects and truths): one diagnosis per record, then the table of docs/d
 its range against the truth, the error before and after against the noise, simulations and wall time.
 
 usage: refdem_table.py DEMCAL_BINARY OUT_DIR [--records A-control-1,A-support-1,...]
-                       [--realisations in_contact:0,all:1,...] [-- FLAGS...]
+                       [--realisations in_contact:0,all:1,...] [--window paper|measured] [-- FLAGS...]
 
 FLAGS after `--` go to every `demcal diagnose` (none: its defaults). Each record gets
 OUT_DIR/<record>/ (campaign.json, the diagnosis); a finished one (diagnosis.json present) is read,
@@ -15,6 +15,8 @@ not run again, so the table resumes. Writes OUT_DIR/table.json and prints the ma
 scene's solver with time_step_faces FACES and time_step_safety 0.5 x (1 + K x 1e-14), as
 tests/pipelines/test_support.hpp), in OUT_DIR/<record>/<FACES_K>/; the table then has one row per
 record, its verdict on each realisation and how many agree with the first.
+
+--window: the campaigns' objective window (docs/smoothing.md); default: the bundled campaigns' own.
 
 "Right": every declared effect named and no other; for a control, "no effect needed". An effect
 record whose diagnosis says "no effect needed" with the base fit within the noise (no candidate
@@ -55,13 +57,15 @@ def truth_of(record):
     return TRUTH[record.rsplit("-", 1)[0]]
 
 
-def campaign_for(record, folder, realisation=None):
+def campaign_for(record, folder, realisation=None, window=None):
     geometry = record.split("-")[0]
     with open(os.path.join(DATA, geometry + "-campaign.json")) as f:
         campaign = json.load(f)
     if realisation:
         faces, k = realisation.split(":")
         campaign["scene"]["solver"] = {"time_step_faces": faces, "time_step_safety": 0.5 * (1 + int(k) * 1e-14)}
+    if window:
+        campaign.setdefault("objective", {})["window"] = window
     campaign["measured"]["file"] = os.path.abspath(os.path.join(DATA, record + ".csv"))
     campaign["output"] = os.path.abspath(os.path.join(folder, "base-campaign"))
     path = os.path.join(folder, "campaign.json")
@@ -70,12 +74,12 @@ def campaign_for(record, folder, realisation=None):
     return path
 
 
-def diagnose(binary, record, out, flags, realisation=None):
+def diagnose(binary, record, out, flags, realisation=None, window=None):
     folder = os.path.join(out, record, realisation.replace(":", "_")) if realisation else os.path.join(out, record)
     os.makedirs(folder, exist_ok=True)
     result = os.path.join(folder, "diag", "diagnosis.json")
     if not os.path.exists(result):
-        campaign = campaign_for(record, folder, realisation)
+        campaign = campaign_for(record, folder, realisation, window)
         start = time.time()
         with open(os.path.join(folder, "diagnose.log"), "w") as log:
             code = subprocess.run([binary, "diagnose", campaign, "--out", os.path.join(folder, "diag"), "--no-report"] +
@@ -189,20 +193,21 @@ def main():
     parser.add_argument("out")
     parser.add_argument("--records", default=",".join(RECORDS))
     parser.add_argument("--realisations", default="")
+    parser.add_argument("--window", choices=["paper", "measured"])
     args = parser.parse_args(argv)
     binary = os.path.abspath(args.binary)
     records = args.records.split(",")
     if not args.realisations:
-        rows = [judged(r, diagnose(binary, r, args.out, flags)) for r in records]
+        rows = [judged(r, diagnose(binary, r, args.out, flags, window=args.window)) for r in records]
         with open(os.path.join(args.out, "table.json"), "w") as f:
-            json.dump({"flags": flags, "rows": rows}, f, indent=2)
+            json.dump({"flags": flags, "window": args.window, "rows": rows}, f, indent=2)
         print(markdown(rows))
         return
     realisations = args.realisations.split(",")
-    by_record = {r: [dict(judged(r, diagnose(binary, r, args.out, flags, x)), realisation=x) for x in realisations]
+    by_record = {r: [dict(judged(r, diagnose(binary, r, args.out, flags, x, args.window)), realisation=x) for x in realisations]
                  for r in records}
     with open(os.path.join(args.out, "table.json"), "w") as f:
-        json.dump({"flags": flags, "realisations": realisations, "rows": by_record}, f, indent=2)
+        json.dump({"flags": flags, "window": args.window, "realisations": realisations, "rows": by_record}, f, indent=2)
     print(realisation_markdown(realisations, by_record))
 
 

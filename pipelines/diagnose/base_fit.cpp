@@ -62,6 +62,58 @@ std::map<std::string, double> base_fit(const CampaignConfig& config, const Diagn
   return result.best.params;
 }
 
+// The refinement: the candidates' search on the base parameters alone from the best set so far,
+// into `folder`; its best replaces that set where it scores better (any set where the window has
+// changed: `d.base_fitness` NaN). Its evaluated sets are appended to `runs`.
+void refine_base(DiagnosisRun& run, const fs::path& folder, std::vector<ParameterSet>& runs) {
+  const CampaignConfig& config = run.config;
+  const DiagnoseOptions& options = run.options;
+  Diagnosis& d = run.d;
+  // Within a total budget the refinement takes at most a quarter of what the base fit left.
+  const long refine_budget = options.max_simulations > 0
+                                 ? std::min(run.per_candidate, (options.max_simulations - run.runner.simulations()) / 4)
+                                 : run.per_candidate;
+  if (refine_budget < 2 * config.optimiser.population) return;
+  ExtendedModel plain;
+  plain.config = config;
+  const CampaignConfig refine = extended_campaign(plain, config, d.base_params, options, refine_budget, folder, d.base_params);
+  progress(options, "refining the base fit (" + std::to_string(refine_budget) + " simulations) in " + folder.string());
+  RunOptions run_options;
+  run_options.resume = options.resume;
+  run_options.progress = options.progress;
+  const CampaignResult r = run_campaign(refine, run_options);
+  run.runner.add_campaign(r);
+  runs.insert(runs.end(), r.all.begin(), r.all.end());
+  if (r.status == CampaignStatus::completed && std::isfinite(r.best.fitness) &&
+      (!std::isfinite(d.base_fitness) || r.best.fitness < d.base_fitness)) {
+    d.base_params = r.best.params;
+    d.base_fitness = r.best.fitness;
+  }
+}
+
+// Under the paper's window a channel is compared over what both curves reach, so a base fit whose
+// simulated gauge hardly moves matches that gauge over a sliver of its measured range and is free
+// to miss the rest: every extended search would then start from a compensation the data never
+// judged. Where the base fit covers less than kNarrowWindow of a fitted channel, the diagnosis
+// compares every channel over its measured range from here on (Diagnosis::widened_window); true
+// when it does.
+bool widen_a_narrow_window(DiagnosisRun& run) {
+  if (run.config.objective_options.window != smoothing::ObjectiveWindow::common) return false;
+  const Evaluation best = run.runner.evaluate(run.config, complete_parameters(run.config, run.d.base_params));
+  if (!best.ok) return false;
+  for (const auto& r : best.residuals)
+    if (r.coverage < kNarrowWindow) run.d.widened_window[key_of(r)] = r.coverage;
+  if (run.d.widened_window.empty()) return false;
+  run.config.objective_options.window = smoothing::ObjectiveWindow::measured;
+  run.d.base_fitness = Diagnosis::kNaN;  // over the other window
+  std::string listed;
+  for (const auto& [key, share] : run.d.widened_window)
+    listed += (listed.empty() ? "" : ", ") + key + " over " + format_number(100 * share, 2) + " %";
+  progress(run.options, "the base fit is compared with part of the measured range only (" + listed +
+                            "): every channel is compared over its measured range from here on");
+  return true;
+}
+
 }  // namespace
 
 void fit_base(DiagnosisRun& run) {
@@ -71,27 +123,10 @@ void fit_base(DiagnosisRun& run) {
   std::vector<ParameterSet> runs;  // every set the base calibrations evaluated
   d.base_params = base_fit(config, options, run.runner, &d.base_fitness, runs);
   run.per_candidate = candidate_budget(options, config);
-  // Within a total budget the refinement takes at most a quarter of what the base fit left.
-  const long refine_budget = options.max_simulations > 0
-                                 ? std::min(run.per_candidate, (options.max_simulations - run.runner.simulations()) / 4)
-                                 : run.per_candidate;
-  if (refine_budget >= 2 * config.optimiser.population) {
-    ExtendedModel plain;
-    plain.config = config;
-    const fs::path folder = fs::path(options.out) / "base-refined";
-    const CampaignConfig refine = extended_campaign(plain, config, d.base_params, options, refine_budget, folder, d.base_params);
-    progress(options, "refining the base fit (" + std::to_string(refine_budget) + " simulations) in " + folder.string());
-    RunOptions run_options;
-    run_options.resume = options.resume;
-    run_options.progress = options.progress;
-    const CampaignResult r = run_campaign(refine, run_options);
-    run.runner.add_campaign(r);
-    runs.insert(runs.end(), r.all.begin(), r.all.end());
-    if (r.status == CampaignStatus::completed && std::isfinite(r.best.fitness) &&
-        (!std::isfinite(d.base_fitness) || r.best.fitness < d.base_fitness)) {
-      d.base_params = r.best.params;
-      d.base_fitness = r.best.fitness;
-    }
+  refine_base(run, fs::path(options.out) / "base-refined", runs);
+  if (widen_a_narrow_window(run)) {
+    runs.clear();  // the further starts are ordered by fitness: the sets of one window only
+    refine_base(run, fs::path(options.out) / "base-refined-measured-window", runs);
   }
   run.base_params = complete_parameters(config, d.base_params);
   run.d.further_starts =

@@ -195,6 +195,7 @@ json ContinuedSearch::to_json() const {
 json Diagnosis::to_json() const {
   json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)},
                {"rerun_errors", base_rerun_errors}};
+  base["widened_window"] = params_json(widened_window);
   base["further_starts"] = json::array();
   for (const auto& s : further_starts) base["further_starts"].push_back(params_json(s));
   json residuals = json::array();

@@ -214,7 +214,9 @@ struct ProbedTarget {
 struct DiagnosisRun {
   DiagnosisRun(CampaignConfig config, DiagnoseOptions options);
 
-  const CampaignConfig config;    // the base model: the campaign's, or one with effects added
+  // The base model: the campaign's, or one with effects added; stage 1 may widen its objective's
+  // window to the measured one (Diagnosis::widened_window), no stage after it changes it.
+  CampaignConfig config;
   const DiagnoseOptions options;
   CaseRunner runner;
   Diagnosis d;

@@ -87,16 +87,24 @@ std::string base_at_bound_note(const Diagnosis& d, const optimise::ParameterSpac
 }
 
 std::string narrow_window_note(const Diagnosis& d) {
-  std::string narrow;
+  std::string widened, narrow;
+  for (const auto& [key, share] : d.widened_window)
+    widened += (widened.empty() ? "" : ", ") + key + " over " + format_number(100 * share, 2) + " %";
   for (const auto& r : d.base_residuals) {
     if (!(r.coverage < kNarrowWindow)) continue;
     narrow += (narrow.empty() ? "" : ", ") + r.case_name + "/" + r.channel + " over " +
               format_number(100 * r.coverage, 2) + " %";
   }
-  if (narrow.empty()) return "";
-  return " The base fit is compared with part of the measured range only: " + narrow +
-         " (its gauge stops short in the simulation, and a gauge that hardly moves matches over what it reaches). "
-         "Set \"objective\": {\"window\": \"measured\"} to compare every channel over its measured range.";
+  const std::string why = " (its gauge stops short in the simulation, and a gauge that hardly moves matches over what it reaches)";
+  std::string note;
+  if (!widened.empty())
+    note += " The campaign's window compared the base fit with part of the measured range only: " + widened + why +
+            "; the diagnosis refined the base fit again comparing every channel over its measured range, and compared "
+            "so from there on, as \"objective\": {\"window\": \"measured\"} does.";
+  if (!narrow.empty())
+    note += " The base fit is compared with part of the measured range only: " + narrow + why +
+            ". Set \"objective\": {\"window\": \"measured\"} to compare every channel over its measured range.";
+  return note;
 }
 
 std::string sparse_measurement_note(const Diagnosis& d) {

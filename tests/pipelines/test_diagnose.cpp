@@ -375,6 +375,13 @@ TEST(Residual, AWindowShortOfTheMeasuredRangeIsReported) {
   const std::string note = narrow_window_note(d);
   EXPECT_NE(note.find("main/abutment_horizontal over 25"), std::string::npos) << note;
   EXPECT_NE(note.find("\"window\": \"measured\""), std::string::npos) << note;
+  // A base fit that the diagnosis compared over the measured window after the campaign's fell short.
+  d.base_residuals = {whole};
+  d.widened_window = {{"main/abutment_horizontal", 0.042}};
+  const std::string widened = narrow_window_note(d);
+  EXPECT_NE(widened.find("main/abutment_horizontal over 4.2 %"), std::string::npos) << widened;
+  EXPECT_NE(widened.find("refined the base fit again"), std::string::npos) << widened;
+  EXPECT_EQ(widened.find("Set \"objective\""), std::string::npos) << widened;
 }
 
 // A gauge that creeps under the rising load, then jumps outward in a fast event while the force
@@ -1403,6 +1410,39 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
     EXPECT_TRUE(written.contains(key)) << key;
   for (const char* file : {"report.md", "archive.sqlite", "base/result.json"}) EXPECT_TRUE(fs::exists(dir / "out" / file)) << file;
   EXPECT_TRUE(fs::exists(dir / "out" / "candidates" / "support-compliance" / "result.json"));
+}
+
+// A gauge measured to travel twenty times farther than any run of the model: under the paper's
+// window the refined base fit is compared over the twentieth its gauge reaches, so the diagnosis
+// refines it again comparing every channel over its measured range, compares so from there on, and
+// says so.
+TEST(DiagnoseLoop, ABaseFitComparedOverASliverOfAGaugeIsComparedOverItAll) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "widened");
+  json j = small_search_campaign(dir, "widened");
+  j["objective"].erase("window");  // the paper's
+  smoothing::Curve measured = smoothing::read_curve(j["measured"].get<std::string>());
+  for (auto& column : measured.columns)
+    if (column.name == "abutment_horizontal")
+      for (double& v : column.values) v *= 20;
+  smoothing::write_curve(measured, j["measured"].get<std::string>());
+  DiagnoseOptions o;
+  o.out = (dir / "out").string();
+  o.effects = {"support-compliance"};
+  o.candidate_simulations = 8;
+  o.profile_simulations = 2;
+  o.progress = false;
+  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "widened.json"), o);
+  ASSERT_EQ(d.status, CampaignStatus::completed) << d.message;
+  ASSERT_EQ(d.widened_window.size(), 1u);
+  EXPECT_EQ(d.widened_window.begin()->first, "main/abutment_horizontal");
+  EXPECT_LT(d.widened_window.begin()->second, kNarrowWindow);
+  ASSERT_FALSE(d.base_residuals.empty());
+  for (const ChannelResidual& r : d.base_residuals) EXPECT_DOUBLE_EQ(r.coverage, 1.0) << r.channel;
+  EXPECT_NE(d.verdict.find("main/abutment_horizontal over "), std::string::npos) << d.verdict;
+  EXPECT_NE(d.verdict.find("refined the base fit again comparing every channel over its measured range"), std::string::npos)
+      << d.verdict;
+  EXPECT_TRUE(fs::exists(dir / "out" / "base-refined-measured-window" / "result.json"));
+  EXPECT_TRUE(test_support::read_json(dir / "out" / "diagnosis.json")["base"]["widened_window"].contains("main/abutment_horizontal"));
 }
 
 // After an effect is accepted the model with it is the next base: the diagnosis runs again in

@@ -426,6 +426,11 @@ struct Diagnosis {
   // base.further_starts): the best base sets of other regions; of a further step (with an effect
   // added), those of the added effect's searches.
   std::vector<std::map<std::string, double>> further_starts;
+  // The fitted channels ("<case>/<channel>" -> share) of which the campaign's window (the paper's)
+  // covered less than kNarrowWindow of the measured range at the refined base fit: the diagnosis
+  // then refined it again and compared every channel over its measured range from there on
+  // (diagnosis.json base.widened_window). Empty: the campaign's window throughout.
+  std::map<std::string, double> widened_window;
   std::map<std::string, double> base_rms;  // "<case>/<channel>" -> N
   // The overall error of the base best set and of its re-runs (DiagnoseOptions::scatter_runs); like
   // a candidate, the base is judged on the run of median error: base_rms, base_residuals and
@@ -527,8 +532,9 @@ std::string unfitted_data_note(const Diagnosis& diagnosis);
 
 // A sentence for the verdict on the base fit's fitted channels whose window covers less than
 // `kNarrowWindow` of the measured range (possible with the paper's window only: the simulated gauge
-// stopped short, and a gauge that hardly moves matches there), recommending the measured window.
-// "" when there are none.
+// stopped short, and a gauge that hardly moves matches there): those of the refined base fit
+// (Diagnosis::widened_window), after which the diagnosis compared over the measured window, and
+// those of the final base fit, for which it recommends that window. "" when there are none.
 constexpr double kNarrowWindow = 0.5;
 std::string narrow_window_note(const Diagnosis& diagnosis);
 
