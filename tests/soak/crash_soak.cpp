@@ -35,6 +35,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 namespace fs = std::filesystem;
 using namespace demcal::pipelines;
@@ -75,6 +76,21 @@ std::pair<long, bool> last_write(const std::string& text) {
     }
   }
   return {last, ended};
+}
+
+// The last `lines` lines of a demcal process's stderr, indented: what a failed run said (a
+// sanitizer's report, an exception), printed with the failure.
+std::string stderr_tail(const fs::path& path, std::size_t lines = 40) {
+  std::vector<std::string> kept;
+  std::istringstream text(read_text(path));
+  for (std::string line; std::getline(text, line);) {
+    if (line.rfind("demcal-archive: write ", 0) == 0) continue;  // the write announcements
+    kept.push_back(line);
+    if (kept.size() > lines) kept.erase(kept.begin());
+  }
+  std::string tail = "  " + path.string() + (kept.empty() ? " is empty\n" : " ends:\n");
+  for (const auto& line : kept) tail += "    " + line + "\n";
+  return tail;
 }
 
 }  // namespace
@@ -146,7 +162,8 @@ int main(int argc, char** argv) {
   const auto t0 = std::chrono::steady_clock::now();
   const ProcessResult reference = run(out / "uninterrupted", false, nullptr, (out / "uninterrupted.stderr").string(), 0);
   if (!reference.ok()) {
-    std::cerr << "crash_soak: the uninterrupted campaign failed: " << reference.message << "\n";
+    std::cerr << "crash_soak: the uninterrupted campaign failed: " << reference.message << "\n"
+              << stderr_tail(out / "uninterrupted.stderr");
     return 1;
   }
   const json expected = comparable(out / "uninterrupted" / "result.json");
@@ -231,7 +248,7 @@ int main(int argc, char** argv) {
       resume = false;
     } else {
       ++failures;
-      std::printf("FAILED: attempt %d ended with %s\n", attempts, r.message.c_str());
+      std::printf("FAILED: attempt %d ended with %s\n%s", attempts, r.message.c_str(), stderr_tail(log).c_str());
       break;
     }
   }
@@ -240,7 +257,7 @@ int main(int argc, char** argv) {
   const ProcessResult last = run(dir, resume, nullptr, (out / "final.stderr").string(), 0);
   if (!last.ok()) {
     ++failures;
-    std::printf("FAILED: the final resume ended with %s\n", last.message.c_str());
+    std::printf("FAILED: the final resume ended with %s\n%s", last.message.c_str(), stderr_tail(out / "final.stderr").c_str());
   } else {
     check(dir, "final cycle " + std::to_string(cycle));
   }
