@@ -5,7 +5,7 @@ declared effects and truths): one diagnosis per record, then the table of docs/d
 its range against the truth, the error before and after against the noise, simulations and wall time.
 
 usage: refdem_table.py DEMCAL_BINARY OUT_DIR [--records A-control-1,A-support-1,...]
-                       [--realisations in_contact:0,all:1,...] [--window paper|measured] [-- FLAGS...]
+                       [--realisations in_contact:0,all:1,...] [--window common|measured] [-- FLAGS...]
 
 FLAGS after `--` go to every `demcal diagnose` (none: its defaults). Each record gets
 OUT_DIR/<record>/ (campaign.json, the diagnosis); a finished one (diagnosis.json present) is read,
@@ -16,7 +16,8 @@ scene's solver with time_step_faces FACES and time_step_safety 0.5 x (1 + K x 1e
 tests/pipelines/test_support.hpp), in OUT_DIR/<record>/<FACES_K>/; the table then has one row per
 record, its verdict on each realisation and how many agree with the first.
 
---window: the campaigns' objective window (docs/smoothing.md); default: the bundled campaigns' own.
+--window: the campaigns' objective window ("common", the paper's, or "measured"; docs/smoothing.md);
+default: the bundled campaigns' own.
 
 "Right": every declared effect named and no other; for a control, "no effect needed". An effect
 record whose diagnosis says "no effect needed" with the base fit within the noise (no candidate
@@ -193,7 +194,7 @@ def main():
     parser.add_argument("out")
     parser.add_argument("--records", default=",".join(RECORDS))
     parser.add_argument("--realisations", default="")
-    parser.add_argument("--window", choices=["paper", "measured"])
+    parser.add_argument("--window", choices=["common", "measured"])
     args = parser.parse_args(argv)
     binary = os.path.abspath(args.binary)
     records = args.records.split(",")

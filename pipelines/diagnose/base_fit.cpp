@@ -106,10 +106,8 @@ bool widen_a_narrow_window(DiagnosisRun& run) {
   if (run.d.widened_window.empty()) return false;
   run.config.objective_options.window = smoothing::ObjectiveWindow::measured;
   run.d.base_fitness = Diagnosis::kNaN;  // over the other window
-  std::string listed;
-  for (const auto& [key, share] : run.d.widened_window)
-    listed += (listed.empty() ? "" : ", ") + key + " over " + format_number(100 * share, 2) + " %";
-  progress(run.options, "the base fit is compared with part of the measured range only (" + listed +
+  progress(run.options, "the base fit is compared with part of the measured range only (" +
+                            listed_coverage({run.d.widened_window.begin(), run.d.widened_window.end()}) +
                             "): every channel is compared over its measured range from here on");
   return true;
 }

@@ -253,6 +253,9 @@ void select_and_search_further(DiagnosisRun& run);     // 5. selection.cpp
 void resample_verdict(DiagnosisRun& run);              // 5c. resampling.cpp
 void bound_accepted_parameters(DiagnosisRun& run);     // 6. ranges.cpp
 void add_verdict_notes(DiagnosisRun& run);             // 7. notes.cpp
+// "<case>/<channel> over N %, ..." of channels and the share of their measured range a window
+// covers, in the order given (notes.cpp).
+std::string listed_coverage(const std::vector<std::pair<std::string, double>>& shares);
 void add_further_effects(DiagnosisRun& run);           // 8. further_effects.cpp
 // The counts and times of `run` into its diagnosis, then diagnosis.json and report.md in its folder.
 void finish_diagnosis(DiagnosisRun& run, double wall_time_s);

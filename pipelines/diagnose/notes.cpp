@@ -86,15 +86,19 @@ std::string base_at_bound_note(const Diagnosis& d, const optimise::ParameterSpac
          "stands in for something the base model lacks; a calibration over a wider range tells the two apart.";
 }
 
+std::string detail::listed_coverage(const std::vector<std::pair<std::string, double>>& shares) {
+  std::string listed;
+  for (const auto& [key, share] : shares)
+    listed += (listed.empty() ? "" : ", ") + key + " over " + format_number(100 * share, 2) + " %";
+  return listed;
+}
+
 std::string narrow_window_note(const Diagnosis& d) {
-  std::string widened, narrow;
-  for (const auto& [key, share] : d.widened_window)
-    widened += (widened.empty() ? "" : ", ") + key + " over " + format_number(100 * share, 2) + " %";
-  for (const auto& r : d.base_residuals) {
-    if (!(r.coverage < kNarrowWindow)) continue;
-    narrow += (narrow.empty() ? "" : ", ") + r.case_name + "/" + r.channel + " over " +
-              format_number(100 * r.coverage, 2) + " %";
-  }
+  std::vector<std::pair<std::string, double>> short_of_range;
+  for (const auto& r : d.base_residuals)
+    if (r.coverage < kNarrowWindow) short_of_range.emplace_back(key_of(r), r.coverage);
+  const std::string widened = listed_coverage({d.widened_window.begin(), d.widened_window.end()});
+  const std::string narrow = listed_coverage(short_of_range);
   const std::string why = " (its gauge stops short in the simulation, and a gauge that hardly moves matches over what it reaches)";
   std::string note;
   if (!widened.empty())
