@@ -98,14 +98,28 @@ def number(v):
 
 
 def effect_parameters(d, declared, truth):
-    """Each parameter of the chosen effects: value, range (the bounds' check), truth, inside or not."""
+    """Each parameter of the chosen effects: value, range (the bounds' check), truth, inside or not.
+    An effect added at a further step is read from that step's diagnosis.json, at the value of the
+    fit with every effect (the last step's)."""
+    steps = {}
+    for a in d.get("added", []):
+        if a["folder"]:
+            with open(os.path.join(a["folder"], "diagnosis.json")) as f:
+                steps[a["effect"]] = json.load(f)
+        else:
+            steps[a["effect"]] = d
+    final = {}
+    if steps:
+        last = steps[d["added"][-1]["effect"]]
+        final = next(c["params"] for c in last["candidates"] if c["effect"] == d["added"][-1]["effect"])
     rows = []
-    for c in d["candidates"]:
-        if c["effect"] not in d["chosen"]:
-            continue
+    for effect in d["chosen"]:
+        step = steps.get(effect, d)
+        c = next(x for x in step["candidates"] if x["effect"] == effect)
         for name, value in sorted(c["params"].items()):
-            if name in d["base"]["params"]:
+            if name in step["base"]["params"]:
                 continue
+            value = final.get(name, value)
             key = name.split(".")[-1]
             b = c.get("bounds", {}).get(name, {})
             lower, upper = b.get("lower"), b.get("upper")

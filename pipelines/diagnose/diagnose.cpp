@@ -162,6 +162,7 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   fit_base(run);
   diagnose_from_base(run);
   add_further_effects(run);
+  check_undecided_leader(run);
   finish_diagnosis(run, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   progress(options, run.d.headline);
   return std::move(run.d);

@@ -257,6 +257,12 @@ void add_verdict_notes(DiagnosisRun& run);             // 7. notes.cpp
 // covers, in the order given (notes.cpp).
 std::string listed_coverage(const std::vector<std::pair<std::string, double>>& shares);
 void add_further_effects(DiagnosisRun& run);           // 8. further_effects.cpp
+// 8b. An undecided verdict (effects tied, or no choice reached by --verdict-share of the resamples)
+// gets the removal check of its closest fit: the base model alone re-fitted from the best-fitting
+// candidate's set. Where that costs no evidence, the candidates' searches only found a better base
+// than the base calibration did, and the diagnosis says so: no effect needed (or none found, above
+// twice the floor). The verdict no longer hangs on where the base calibration happened to stop.
+void check_undecided_leader(DiagnosisRun& run);       // further_effects.cpp
 // The counts and times of `run` into its diagnosis, then diagnosis.json and report.md in its folder.
 void finish_diagnosis(DiagnosisRun& run, double wall_time_s);
 // Stages 2 to 7 on the base model of `run`, whose base fit is set (stage 1, or a previous step).

@@ -134,6 +134,20 @@ std::string effects_text(const std::vector<ModelEffect>& effects, const std::map
   return text;
 }
 
+// The outcome and headline where the base model alone, re-fitted from `effect`'s fit (its error in
+// d.error_after), does as well: what the effect gained was the base parameters' search, not the
+// effect. `errors`: the error of each step before, "492 → 331".
+void settle_on_base_alone(Diagnosis& d, const DiagnosisRun& run, const std::string& effect, const std::string& why,
+                          const std::string& errors) {
+  d.chosen.clear();
+  d.outcome = d.error_after > 2 * floor_of(d, run.options) ? DiagnosisOutcome::unexplained
+                                                           : DiagnosisOutcome::no_effect_needed;
+  d.headline = std::string(d.outcome == DiagnosisOutcome::unexplained ? "No effect found" : "No effect needed") +
+               ": the base model re-fitted from the " + effect + " fit reaches " + format_number(d.error_after, 3) +
+               " N, so " + why + "; force error " + errors + " → " + format_number(d.error_after, 3) +
+               " N against " + format_number(run.noise, 3) + " N of noise.";
+}
+
 // The removal check of the effects added (Diagnosis::removal_checks): each left out in turn, the
 // model with the others (the first alone: the base) calibrated again from the fit with all of them;
 // the one whose removal costs least is dropped when it costs no evidence, and the verdict says so
@@ -182,14 +196,7 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
                           format_number(criteria[k], 3) + ")";
   const std::string against = " N against " + format_number(run.noise, 3) + " N of noise";
   if (kept.empty()) {
-    // the base alone, re-fitted from the effect's fit, does as well: what the effect gained was
-    // the base parameters' search, not the effect
-    d.outcome = d.error_after > 2 * floor_of(d, run.options) ? DiagnosisOutcome::unexplained
-                                                             : DiagnosisOutcome::no_effect_needed;
-    d.headline = std::string(d.outcome == DiagnosisOutcome::unexplained ? "No effect found" : "No effect needed") +
-                 ": the base model re-fitted from the " + dropped.effect + " fit reaches " +
-                 format_number(d.error_after, 3) + " N, so " + why + "; force error " + errors + " → " +
-                 format_number(d.error_after, 3) + against + ".";
+    settle_on_base_alone(d, run, dropped.effect, why, errors);
   } else {
     d.headline = std::string(kept.size() == 1 ? "Missing: " : "Missing " + std::to_string(kept.size()) + " effects: ") +
                  effects_text(kept, sets[k], run.d) + "; force error " + errors + " → " +
@@ -200,6 +207,38 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
 }
 
 }  // namespace
+
+void check_undecided_leader(DiagnosisRun& run) {
+  Diagnosis& d = run.d;
+  if (d.outcome != DiagnosisOutcome::undecided || !run.options.removal_check) return;
+  const EffectCandidate* leader = nullptr;
+  for (const auto& c : d.candidates)
+    if (c.tried && std::isfinite(c.error) && run.best_sets.count(c.effect) && (leader == nullptr || c.error < leader->error))
+      leader = &c;
+  if (leader == nullptr) return;
+  const fs::path folder = fs::path(run.options.out) / ("without-" + leader->effect);
+  progress(run.options, "removal check of the undecided verdict's closest fit: the base model re-fitted from the " +
+                            leader->effect + " fit in " + folder.string());
+  std::map<std::string, double> set;
+  const EffectCandidate without = fit_with(run, {}, run.best_sets.at(leader->effect), leader->residuals, folder, set);
+  int drop = -1;
+  const std::vector<double> criterion = removal_criteria(
+      leader->residuals, {std::isfinite(without.error) ? without.residuals : std::vector<ChannelResidual>{}},
+      {leader->effect_parameters}, run.options.evidence, drop);
+  d.removal_checks.push_back({leader->effect, criterion.front(), without.error, folder.string(), drop == 0});
+  if (drop != 0) {
+    add_note(d, " Removal check of the closest fit: the base model re-fitted from the " + leader->effect + " fit, in " +
+                    folder.string() + ", reaches " + format_number(without.error, 3) + " N, criterion " +
+                    format_number(criterion.front(), 3) + " against " + leader->effect + "'s fit: the effects stay undecided.");
+    return;
+  }
+  d.error_after = without.error;
+  const std::string why = "the undecided effects are not needed (criterion " + format_number(criterion.front(), 3) +
+                          " against that fit, the closest)";
+  settle_on_base_alone(d, run, leader->effect, why, format_number(d.error_before, 3));
+  add_note(d, " Removal check of the closest fit: " + why + "; the model without it, in " + folder.string() +
+                  ", fits to " + format_number(d.error_after, 3) + " N.");
+}
 
 void add_further_effects(DiagnosisRun& run) {
   Diagnosis& d = run.d;

@@ -1,10 +1,11 @@
 // The diagnosis on records that another DEM code made (data/refdem-arch/, its README): another
 // contact discretisation, damping and effect laws than the engine that calibrates them, as measured
-// data are. The control needs no effect; a compliant right abutment is named there, with its
-// stiffness and its bounds, every stage of the loop checked on the way. Shortened searches (the
-// campaign's base 30 runs, two candidates, no further search) keep each within three minutes; the
-// full table over every record is a benchmark (scripts/refdem_table.py, docs/diagnose.md). Each runs on
-// the round-off realisation DEMCAL_TEST_REALISATION names.
+// data are. The control and a friction softening below the noise need no effect; a compliant
+// right abutment is named there, with its stiffness and its bounds, every stage of the loop checked
+// on the way. Shortened searches (two candidates, no further search; the abutment's base 30 runs)
+// keep each within three minutes; the full table over every record is a benchmark
+// (scripts/refdem_table.py, docs/diagnose.md). Each runs on the round-off realisation
+// DEMCAL_TEST_REALISATION names, the softening on the one after it too.
 #include "demcal/pipelines/diagnose.hpp"
 #include "test_support.hpp"
 
@@ -23,12 +24,14 @@ namespace {
 
 const fs::path kRecords = fs::path(DEMCAL_SOURCE_DIR) / "data" / "refdem-arch";
 
-// A-campaign.json on `record`, its base calibration shortened, on the given round-off realisation.
-CampaignConfig record_campaign(const std::string& record, const fs::path& dir, const Realisation& realisation) {
+// A-campaign.json on `record` on the given round-off realisation, its base calibration shortened
+// to `base_simulations` (0: the campaign's own).
+CampaignConfig record_campaign(const std::string& record, const fs::path& dir, const Realisation& realisation,
+                               int base_simulations = 30) {
   json j = test_support::read_json(kRecords / "A-campaign.json");
   j["measured"]["file"] = (kRecords / (record + ".csv")).string();
   j["output"] = (dir / "base-campaign").string();
-  j["optimiser"]["max_evaluations"] = 30;
+  if (base_simulations > 0) j["optimiser"]["max_evaluations"] = base_simulations;
   j["scene"]["solver"] = realisation.solver();
   return campaign_from_json(j, kRecords.string(), record);
 }
@@ -50,7 +53,45 @@ DiagnoseOptions shortened(const fs::path& dir, const std::vector<std::string>& e
   return o;
 }
 
+// What a record that needs no effect gets: "no effect needed" with the numbers, whatever effects
+// are on offer. Either the base fit is within the noise, or candidates are calibrated and the base
+// model alone, re-fitted from the closest of their fits, does as well (the removal check of an
+// undecided verdict): on some realisations the base calibration stops above the noise, and the
+// candidates' searches, re-fitting the base parameters too, find what it missed.
+void expect_no_effect_needed(const std::string& record, const Realisation& realisation) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "refdem-" + record + "-" + realisation.name());
+  DiagnoseOptions options = shortened(dir, {}, false, false);
+  options.candidate_simulations = DiagnoseOptions{}.candidate_simulations;
+  const Diagnosis d = run_diagnosis(record_campaign(record, dir, realisation, 0), options);
+  EXPECT_EQ(d.outcome, DiagnosisOutcome::no_effect_needed) << d.verdict;
+  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
+  EXPECT_NE(d.headline.find("No effect needed: "), std::string::npos) << d.headline;
+  const double noise = d.noise.begin()->second;
+  if (d.removal_checks.empty()) {
+    EXPECT_EQ(d.error_after, d.error_before);
+    for (const auto& c : d.candidates) EXPECT_NE(c.verdict, CandidateVerdict::accepted) << c.effect;
+    EXPECT_EQ(d.advised_candidate_simulations, 0);  // a settled verdict advises no longer search
+  } else {
+    ASSERT_EQ(d.removal_checks.size(), 1u);
+    const Diagnosis::RemovalCheck& check = d.removal_checks.front();
+    EXPECT_TRUE(check.dropped) << check.effect;
+    EXPECT_GT(check.criterion, -DiagnoseOptions{}.evidence);
+    EXPECT_EQ(d.error_after, check.error_without);
+    EXPECT_TRUE(fs::exists(fs::path(check.folder) / "result.json")) << check.folder;
+    EXPECT_NE(d.headline.find("re-fitted from the " + check.effect + " fit"), std::string::npos) << d.headline;
+  }
+  EXPECT_LT(d.error_after, 2 * noise) << d.headline;  // the two codes agree to about the noise
+}
+
 class RefdemRecord : public ::testing::TestWithParam<Realisation> {};
+class RefdemTwoRealisations : public ::testing::TestWithParam<Realisation> {};
+
+// The realisation DEMCAL_TEST_REALISATION names and the one after it.
+std::vector<Realisation> two_realisations() {
+  Realisation next = test_support::realisation_from_environment();
+  ++next.k;
+  return {test_support::realisation_from_environment(), next};
+}
 
 }  // namespace
 
@@ -68,19 +109,16 @@ TEST(CandidateBudget, IsItsOwnUnlessZeroAsksForTheCampaigns) {
   EXPECT_EQ(candidate_budget(o, config), 24);
 }
 
-// The other code's control (kn 2.9e9, ks 1.2e9, friction 32.5°, 1.5 % noise): whatever effects are
-// on offer, none is needed, and the verdict says it with the numbers.
-TEST_P(RefdemRecord, TheControlNeedsNoEffect) {
-  const fs::path dir = test_support::fresh_dir("diagnose", "refdem-control-" + GetParam().name());
-  const Diagnosis d = run_diagnosis(record_campaign("A-control-1", dir, GetParam()), shortened(dir, {}, false, false));
-  EXPECT_EQ(d.outcome, DiagnosisOutcome::no_effect_needed) << d.verdict;
-  EXPECT_TRUE(d.chosen.empty()) << d.verdict;
-  EXPECT_EQ(d.error_after, d.error_before);
-  EXPECT_TRUE(d.removal_checks.empty());
-  for (const auto& c : d.candidates) EXPECT_NE(c.verdict, CandidateVerdict::accepted) << c.effect;
-  EXPECT_NE(d.headline.find("No effect needed: force error"), std::string::npos) << d.headline;
-  EXPECT_LT(d.error_before, 2 * (d.noise.begin()->second));  // the two codes agree to about the noise
-  EXPECT_EQ(d.advised_candidate_simulations, 0);  // a settled verdict advises no longer search
+// The other code's control (kn 2.9e9, ks 1.2e9, friction 32.5°, 1.5 % noise).
+TEST_P(RefdemRecord, TheControlNeedsNoEffect) { expect_no_effect_needed("A-control-1", GetParam()); }
+
+// The other code's friction softening, 34° -> 26° over 0.5 mm of slip (kn 3.0e9, ks 1.3e9): on the
+// reference arch the base model fits it to within the noise (data/refdem-arch/README.md allows
+// it), so no effect may be named; the false positive this guards against is a compliant support.
+// It runs on two realisations: on the second after the default (in_contact:1) the base
+// calibration stops at 1.3 x the noise and the undecided candidates get the removal check.
+TEST_P(RefdemTwoRealisations, ASofteningBelowTheNoiseIsNotTakenForAnEffect) {
+  expect_no_effect_needed("A-softening-1", GetParam());
 }
 
 // The other code's right abutment on a 2 MN/m horizontal spring (kn 3.4e9, ks 1.3e9, friction 31.5°),
@@ -168,4 +206,6 @@ TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
 }
 
 INSTANTIATE_TEST_SUITE_P(DiagnoseLoop, RefdemRecord, ::testing::Values(test_support::realisation_from_environment()),
+                         test_support::realisation_name);
+INSTANTIATE_TEST_SUITE_P(DiagnoseLoop, RefdemTwoRealisations, ::testing::ValuesIn(two_realisations()),
                          test_support::realisation_name);

@@ -30,7 +30,9 @@
 //                    others re-fitted where needed);
 //   7. more effects  the model with the accepted effect is the next base (max_effects); then each
 //                    effect added is re-fitted without (the base alone for one: removal_criteria)
-//                    and dropped where its removal costs no evidence.
+//                    and dropped where its removal costs no evidence; an undecided verdict's
+//                    closest fit is checked so too, and where the base alone re-fitted from it
+//                    does as well, no effect is needed.
 //
 // Outputs: <out>/diagnosis.json (layout in docs/commands/diagnose.md) and <out>/report.md with residual
 // plots before and after, the table of candidates and the verdict in words. Forces in N,
@@ -461,7 +463,8 @@ struct Diagnosis {
   // Each effect added, its removal check (removal_criteria): the model with the others (the base
   // alone for one) re-calibrated without it, and the criterion change from that fit to the model
   // with all. An effect whose removal costs no evidence is dropped again (`dropped`), left out of
-  // `chosen`.
+  // `chosen`. An undecided verdict gets the same check of its closest fit (the candidate of lowest
+  // error): where `dropped`, no effect is needed there (or none found) and the outcome says so.
   struct RemovalCheck {
     std::string effect;
     double criterion = kNaN;      // negative: the effect still pays for its parameters; NaN: no fit
