@@ -1467,11 +1467,21 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   const json written = test_support::read_json(dir / "out" / "diagnosis.json");
   ASSERT_TRUE(written["added"].is_array());
   EXPECT_EQ(written["added"].size(), d.added.size());
-  const auto dropped = std::count_if(d.removal_checks.begin(), d.removal_checks.end(),
-                                     [](const Diagnosis::RemovalCheck& r) { return r.dropped; });
+  // each effect added is in the verdict or was dropped again by its removal check
+  const auto dropped = std::count_if(d.removal_checks.begin(), d.removal_checks.end(), [&](const Diagnosis::RemovalCheck& r) {
+    return r.dropped && std::any_of(d.added.begin(), d.added.end(), [&](const auto& a) { return a.effect == r.effect; });
+  });
   EXPECT_EQ(d.added.size(), d.chosen.size() + static_cast<std::size_t>(dropped));
   if (d.outcome != DiagnosisOutcome::missing_effect) {
-    EXPECT_TRUE(d.added.empty()) << d.verdict;
+    EXPECT_TRUE(d.chosen.empty()) << d.verdict;
+    if (d.added.empty()) {
+      // an undecided verdict checks its closest fit, and is settled where the base alone does as well
+      EXPECT_LE(d.removal_checks.size(), 1u);
+      for (const auto& r : d.removal_checks) {
+        EXPECT_EQ(r.dropped, d.outcome != DiagnosisOutcome::undecided) << r.effect;
+        EXPECT_TRUE(fs::exists(fs::path(r.folder) / "result.json")) << r.folder;
+      }
+    }
     // a further step only from an effect added tentatively, beside which nothing passed
     for (const auto& e : o.effects) {
       if (fs::exists(dir / "out" / ("with-" + e))) {
