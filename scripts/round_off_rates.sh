@@ -7,7 +7,7 @@
 #   default filter: the diagnosis loop's effect tests and the synthetic recovery
 set -uo pipefail
 build=${1:-build}
-filter=${2:-'DiagnoseLoop/RefdemRecord.*:DiagnoseLoop/HiddenCohesion.*:Synthetic/Recovery.*'}
+filter=${2:-'DiagnoseLoop/Refdem*:DiagnoseLoop/HiddenCohesion.*:Synthetic/Recovery.*'}
 declare -A passed total
 for faces in all in_contact; do
   for k in 0 1 -1 2; do
