@@ -28,6 +28,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -35,7 +36,6 @@
 #include <sstream>
 #include <string>
 #include <thread>
-#include <vector>
 
 namespace fs = std::filesystem;
 using namespace demcal::pipelines;
@@ -81,12 +81,12 @@ std::pair<long, bool> last_write(const std::string& text) {
 // The last `lines` lines of a demcal process's stderr, indented: what a failed run said (a
 // sanitizer's report, an exception), printed with the failure.
 std::string stderr_tail(const fs::path& path, std::size_t lines = 40) {
-  std::vector<std::string> kept;
+  std::deque<std::string> kept;
   std::istringstream text(read_text(path));
   for (std::string line; std::getline(text, line);) {
     if (line.rfind("demcal-archive: write ", 0) == 0) continue;  // the write announcements
     kept.push_back(line);
-    if (kept.size() > lines) kept.erase(kept.begin());
+    if (kept.size() > lines) kept.pop_front();
   }
   std::string tail = "  " + path.string() + (kept.empty() ? " is empty\n" : " ends:\n");
   for (const auto& line : kept) tail += "    " + line + "\n";
