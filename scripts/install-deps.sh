@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs the Debian packages demcal builds and runs with, when any is missing.
+# Installs the Debian packages demcal builds and runs with, when any is missing, and the further
+# packages named as arguments (`make test-sanitize` names clang's).
 # Needs root (or sudo) only when something must be installed; prints what it does.
 set -euo pipefail
 packages=(
@@ -10,6 +11,7 @@ packages=(
   # An optimised BLAS for LibTorch (it links libblas.so.3, the reference BLAS unless an alternative
   # is installed): the serial OpenBLAS measured fastest per CPU second (docs/benchmarks.md).
   libopenblas0-serial
+  "$@"
 )
 missing=()
 for p in "${packages[@]}"; do

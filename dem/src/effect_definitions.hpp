@@ -12,6 +12,7 @@
 #pragma once
 
 #include "demcal/common/format.hpp"
+#include "demcal/common/units.hpp"
 #include "demcal/dem/effects.hpp"
 
 #include <algorithm>
@@ -21,8 +22,6 @@
 namespace demcal::dem::effects {
 
 inline constexpr double kInf = std::numeric_limits<double>::infinity();
-inline constexpr double kDegree = std::numbers::pi / 180.0;
-
 // Whether any joint group of `scene` has the law `on` switched on (JointMaterial::closure_on, ...).
 inline bool any_joint_group(const Scene& scene, bool (JointMaterial::*on)() const) {
   return std::any_of(scene.joint_groups.begin(), scene.joint_groups.end(),

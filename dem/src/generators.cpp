@@ -1,6 +1,7 @@
 #include "demcal/dem/generators.hpp"
 
 #include "demcal/dem/effects.hpp"
+#include "demcal/common/units.hpp"
 
 #include "demcal/limits/limits.hpp"
 
@@ -13,7 +14,6 @@ namespace demcal::dem {
 
 namespace {
 
-constexpr double kDegree = std::numbers::pi / 180.0;
 // Below this springing-joint angle above horizontal the abutment's top is the springing face
 // extended: twice the contact search's default edge-angle tolerance (10 deg), so that the level
 // top and the springing face are never taken for one face.

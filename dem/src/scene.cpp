@@ -6,6 +6,7 @@
 #include "demcal/dem/effects.hpp"
 
 #include "demcal/common/format.hpp"
+#include "demcal/common/units.hpp"
 #include "demcal/limits/limits.hpp"
 
 #include <nlohmann/json.hpp>
@@ -24,8 +25,6 @@ namespace demcal::dem {
 using nlohmann::json;
 
 namespace {
-
-constexpr double kDegree = std::numbers::pi / 180.0;
 
 void require_unit(const Vec2& v, const std::string& where) {
   require_finite(v.x(), where);
@@ -529,7 +528,7 @@ json scene_to_json(const Scene& scene) {
   for (const auto& [group, m] : scene.joint_groups) {
     json g = {{"kn", m.normal_stiffness}, {"ks", m.shear_stiffness}, {"friction_deg", m.friction_angle / kDegree}};
     // Effect keys appear only when set, so a scene without effects keeps its text and its hash.
-    for_each_effect_field([&](const Effect&, const SceneField& f) {
+    for_each_effect_field([&, &m = m](const Effect&, const SceneField& f) {
       if (f.material && (f.written ? f.written(m) : m.*f.material != 0)) g[f.key()] = given_value(f, m.*f.material);
     });
     j["joint_groups"][group] = g;

@@ -133,7 +133,7 @@ std::string outside_space(const optimise::ParameterSpace& space, const std::map<
   }
   for (const auto& [name, value] : params) {
     const bool known = fixed.count(name) || (tied && tied->name == name) ||
-                       std::any_of(free.begin(), free.end(), [&](const auto& p) { return p.name == name; });
+                       std::any_of(free.begin(), free.end(), [&name = name](const auto& p) { return p.name == name; });
     if (!known) return "'" + name + "' is not a parameter of the campaign";
   }
   for (const auto& [name, value] : fixed) {

@@ -10,7 +10,7 @@
 #include <iostream>
 #include <memory>
 
-namespace {
+namespace demcal::cli::calibrate_command {
 
 struct CalibrateFlags {
   std::string campaign_file;
@@ -179,6 +179,6 @@ void setup(CLI::App& app) {
   sub->callback([flags] { run(*flags); });
 }
 
-}  // namespace
+}  // namespace demcal::cli::calibrate_command
 
-DEMCAL_REGISTER_COMMAND("calibrate", setup);
+DEMCAL_REGISTER_COMMAND("calibrate", demcal::cli::calibrate_command::setup);

@@ -9,7 +9,7 @@
 #include <memory>
 #include <sstream>
 
-namespace {
+namespace demcal::cli::diagnose_command {
 
 // The options' defaults are DiagnoseOptions' own; the text flags are split into names in run().
 struct DiagnoseFlags {
@@ -138,6 +138,6 @@ void setup(CLI::App& app) {
   });
 }
 
-}  // namespace
+}  // namespace demcal::cli::diagnose_command
 
-DEMCAL_REGISTER_COMMAND("diagnose", setup);
+DEMCAL_REGISTER_COMMAND("diagnose", demcal::cli::diagnose_command::setup);

@@ -9,7 +9,7 @@
 #include <iostream>
 #include <stdexcept>
 
-namespace {
+namespace demcal::cli::fitness_command {
 
 struct FitnessArgs {
   std::string experiment, simulation, force_column = "force";
@@ -82,4 +82,4 @@ void setup(CLI::App& app) {
 
 DEMCAL_REGISTER_COMMAND("fitness", setup);
 
-}  // namespace
+}  // namespace demcal::cli::fitness_command

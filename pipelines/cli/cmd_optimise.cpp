@@ -13,7 +13,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace {
+namespace demcal::cli::optimise_command {
 
 using demcal::optimise::OptimiserOptions;
 
@@ -94,6 +94,6 @@ void setup(CLI::App& app) {
   sub->callback([options] { run(*options); });
 }
 
-}  // namespace
+}  // namespace demcal::cli::optimise_command
 
-DEMCAL_REGISTER_COMMAND("optimise", setup);
+DEMCAL_REGISTER_COMMAND("optimise", demcal::cli::optimise_command::setup);

@@ -11,7 +11,7 @@
 #include <iostream>
 #include <memory>
 
-namespace {
+namespace demcal::cli::predict_command {
 
 struct PredictFlags {
   std::string campaign_file, result_file, out;
@@ -84,6 +84,6 @@ void setup(CLI::App& app) {
   sub->callback([flags] { run(*flags); });
 }
 
-}  // namespace
+}  // namespace demcal::cli::predict_command
 
-DEMCAL_REGISTER_COMMAND("predict", setup);
+DEMCAL_REGISTER_COMMAND("predict", demcal::cli::predict_command::setup);

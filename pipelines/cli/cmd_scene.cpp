@@ -6,7 +6,7 @@
 
 #include <iostream>
 
-namespace {
+namespace demcal::cli::scene_command {
 
 using namespace demcal::dem;
 
@@ -115,4 +115,4 @@ void setup_scene(CLI::App& app) {
 
 DEMCAL_REGISTER_COMMAND("scene", setup_scene);
 
-}  // namespace
+}  // namespace demcal::cli::scene_command

@@ -9,7 +9,7 @@
 #include <fstream>
 #include <iostream>
 
-namespace {
+namespace demcal::cli::simulate_command {
 
 namespace fs = std::filesystem;
 using namespace demcal::dem;
@@ -48,4 +48,4 @@ void setup_simulate(CLI::App& app) {
 
 DEMCAL_REGISTER_COMMAND("simulate", setup_simulate);
 
-}  // namespace
+}  // namespace demcal::cli::simulate_command

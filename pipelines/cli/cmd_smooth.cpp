@@ -8,7 +8,7 @@
 #include <iostream>
 #include <stdexcept>
 
-namespace {
+namespace demcal::cli::smooth_command {
 
 struct SmoothArgs {
   std::string input, output, x_column, y_column, plot;
@@ -88,4 +88,4 @@ void setup(CLI::App& app) {
 
 DEMCAL_REGISTER_COMMAND("smooth", setup);
 
-}  // namespace
+}  // namespace demcal::cli::smooth_command

@@ -6,7 +6,7 @@
 #include <iostream>
 #include <memory>
 
-namespace {
+namespace demcal::cli::study_command {
 
 void setup(CLI::App& app) {
   struct Flags {
@@ -30,6 +30,6 @@ void setup(CLI::App& app) {
   });
 }
 
-}  // namespace
+}  // namespace demcal::cli::study_command
 
-DEMCAL_REGISTER_COMMAND("study", setup);
+DEMCAL_REGISTER_COMMAND("study", demcal::cli::study_command::setup);

@@ -11,7 +11,7 @@
 #include <iostream>
 #include <memory>
 
-namespace {
+namespace demcal::cli::surrogate_command {
 
 using nlohmann::json;
 
@@ -132,6 +132,6 @@ void setup(CLI::App& app) {
   c->callback([check_flags] { check(*check_flags); });
 }
 
-}  // namespace
+}  // namespace demcal::cli::surrogate_command
 
-DEMCAL_REGISTER_COMMAND("surrogate", setup);
+DEMCAL_REGISTER_COMMAND("surrogate", demcal::cli::surrogate_command::setup);

@@ -1,5 +1,7 @@
 // Subcommand registry of the `demcal` program. Each cli/cmd_*.cpp file registers its own
 // subcommand with a static DEMCAL_REGISTER_COMMAND, so modules add commands without editing main.
+// Each file keeps its code in a namespace of its own (demcal::cli::<name>_command), so that the
+// unity build, which compiles several files as one, joins them without a clash.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -34,4 +36,4 @@ struct CommandRegistrar {
 #define DEMCAL_CONCAT_INNER(a, b) a##b
 #define DEMCAL_CONCAT(a, b) DEMCAL_CONCAT_INNER(a, b)
 #define DEMCAL_REGISTER_COMMAND(name, setup_function) \
-  static const ::demcal::cli::CommandRegistrar DEMCAL_CONCAT(demcal_command_, __LINE__)(name, setup_function)
+  static const ::demcal::cli::CommandRegistrar DEMCAL_CONCAT(demcal_command_, __COUNTER__)(name, setup_function)

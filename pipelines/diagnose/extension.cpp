@@ -77,7 +77,7 @@ std::vector<std::map<std::string, double>> further_start_sets(const std::map<std
   std::vector<std::map<std::string, double>> starts;
   for (const auto& [r, x] : ranked) {
     if (static_cast<int>(starts.size()) >= count) break;
-    if (std::all_of(taken.begin(), taken.end(), [&](const Eigen::VectorXd& t) { return (x - t).norm() >= separation; })) {
+    if (std::all_of(taken.begin(), taken.end(), [&, &x = x](const Eigen::VectorXd& t) { return (x - t).norm() >= separation; })) {
       taken.push_back(x);
       starts.push_back(r->params);
     }

@@ -201,7 +201,7 @@ std::string detail::fitted_effect_parameters(const EffectCandidate& c, const Dia
     const dem::EffectParameter* p = effect.parameter(dem::parameter_field(name));
     if (!p) continue;
     const std::string field = uses[dem::parameter_field(name)] > 1 ? name : dem::parameter_field(name);
-    const auto b = std::find_if(c.bounds.begin(), c.bounds.end(), [&](const ParameterBound& x) { return x.name == name; });
+    const auto b = std::find_if(c.bounds.begin(), c.bounds.end(), [&name = name](const ParameterBound& x) { return x.name == name; });
     if (b != c.bounds.end() && !std::isfinite(b->lower) && !std::isfinite(b->upper)) {
       loose += (loose.empty() ? "" : ", ") + field;
       continue;

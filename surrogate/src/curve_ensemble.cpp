@@ -13,26 +13,8 @@ namespace demcal::surrogate {
 
 namespace {
 
-nlohmann::json matrix_json(const Eigen::MatrixXd& m) {
-  nlohmann::json rows = nlohmann::json::array();
-  for (Eigen::Index i = 0; i < m.rows(); ++i) {
-    std::vector<double> row(static_cast<size_t>(m.cols()));
-    for (Eigen::Index j = 0; j < m.cols(); ++j) row[static_cast<size_t>(j)] = m(i, j);
-    rows.push_back(row);
-  }
-  return rows;
-}
-
-Eigen::MatrixXd matrix_from(const nlohmann::json& j) {
-  const auto rows = j.get<std::vector<std::vector<double>>>();
-  Eigen::MatrixXd m(static_cast<Eigen::Index>(rows.size()), rows.empty() ? 0 : static_cast<Eigen::Index>(rows[0].size()));
-  for (size_t i = 0; i < rows.size(); ++i) {
-    if (static_cast<Eigen::Index>(rows[i].size()) != m.cols()) throw std::invalid_argument("ragged matrix");
-    for (size_t k = 0; k < rows[i].size(); ++k) m(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = rows[i][k];
-  }
-  return m;
-}
-
+using detail::matrix_from;
+using detail::matrix_json;
 using detail::vector_from;
 
 }  // namespace

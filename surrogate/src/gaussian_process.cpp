@@ -356,17 +356,7 @@ LooSummary GaussianProcess::leave_one_out() const {
   return s;
 }
 
-namespace {
-nlohmann::json matrix_json(const Eigen::MatrixXd& m) {
-  nlohmann::json rows = nlohmann::json::array();
-  for (Eigen::Index i = 0; i < m.rows(); ++i) {
-    nlohmann::json row = nlohmann::json::array();
-    for (Eigen::Index k = 0; k < m.cols(); ++k) row.push_back(m(i, k));
-    rows.push_back(row);
-  }
-  return rows;
-}
-}  // namespace
+using detail::matrix_json;
 
 nlohmann::json GaussianProcess::to_json() const {
   nlohmann::json lengths = nlohmann::json::array();

@@ -1,5 +1,5 @@
-// Private to the surrogate module: what its sources share (JSON of vectors, the held-out relative
-// error, reading an options struct by its field table).
+// Private to the surrogate module: what its sources share (JSON of vectors and matrices, the
+// held-out relative error, reading an options struct by its field table).
 #pragma once
 
 #include "demcal/common/field_table.hpp"
@@ -23,6 +23,27 @@ inline nlohmann::json vector_json(const Eigen::VectorXd& v) {
 inline Eigen::VectorXd vector_from(const nlohmann::json& j) {
   const auto v = j.get<std::vector<double>>();
   return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+}
+
+// A matrix as JSON rows, and back (a ragged row is an error).
+inline nlohmann::json matrix_json(const Eigen::MatrixXd& m) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    std::vector<double> row(static_cast<size_t>(m.cols()));
+    for (Eigen::Index j = 0; j < m.cols(); ++j) row[static_cast<size_t>(j)] = m(i, j);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+inline Eigen::MatrixXd matrix_from(const nlohmann::json& j) {
+  const auto rows = j.get<std::vector<std::vector<double>>>();
+  Eigen::MatrixXd m(static_cast<Eigen::Index>(rows.size()), rows.empty() ? 0 : static_cast<Eigen::Index>(rows[0].size()));
+  for (size_t i = 0; i < rows.size(); ++i) {
+    if (static_cast<Eigen::Index>(rows[i].size()) != m.cols()) throw std::invalid_argument("ragged matrix");
+    for (size_t k = 0; k < rows[i].size(); ++k) m(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = rows[i][k];
+  }
+  return m;
 }
 
 // Held-out relative error: mean |ŷ − y| / mean |y − mean(y)| from the absolute errors and the
