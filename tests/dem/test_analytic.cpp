@@ -1,6 +1,7 @@
 // Analytic checks of the engine, each with its stated tolerance.
 #include "demcal/dem/generators.hpp"
 #include "demcal/dem/simulation.hpp"
+#include "test_support.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,17 +11,10 @@
 namespace {
 
 using namespace demcal::dem;
-constexpr double kDeg = std::numbers::pi / 180;
+using test_support::kDeg;
 constexpr double g = 9.81;
 
-Block box(const std::string& name, double x0, double y0, double x1, double y1, bool fixed, double density = 2000) {
-  Block b;
-  b.name = name;
-  b.density = density;
-  b.fixed = fixed;
-  b.vertices = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
-  return b;
-}
+using test_support::box;
 
 // A block b x h on a long fixed base; gravity tilted by `tilt` (equivalent to tilting the base).
 Scene block_on_base(double b, double h, double tilt, double friction_deg, double kn = 1e9, double ks = 4e8) {
@@ -38,11 +32,7 @@ Scene block_on_base(double b, double h, double tilt, double friction_deg, double
   return s;
 }
 
-const BlockState& block_named(const Recording& r, const std::string& name) {
-  for (const auto& b : r.final_blocks)
-    if (b.name == name) return b;
-  throw std::runtime_error("no block " + name);
-}
+using test_support::block_named;
 
 TEST(Incline, SticksWhileTangentBelowFriction) {
   // Just below the limit (tan = 0.98 tan 30 deg) the block must come to rest (equilibrium). It

@@ -3,6 +3,7 @@
 #include "demcal/dem/effects.hpp"
 #include "demcal/dem/generators.hpp"
 #include "demcal/dem/simulation.hpp"
+#include "test_support.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -17,23 +18,12 @@
 namespace {
 
 using namespace demcal::dem;
-constexpr double kDeg = std::numbers::pi / 180;
+using test_support::kDeg;
 constexpr double kWidth = 0.2, kLength = 0.2, kArea = kWidth * kLength;  // the joint: 0.2 m x 0.2 m
 
-Block box(const std::string& name, double x0, double y0, double x1, double y1, bool fixed) {
-  Block b;
-  b.name = name;
-  b.density = 2000;
-  b.fixed = fixed;
-  b.vertices = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
-  return b;
-}
+using test_support::box;
 
-const BlockState& block_named(const Recording& r, const std::string& name) {
-  for (const auto& b : r.final_blocks)
-    if (b.name == name) return b;
-  throw std::runtime_error("no block " + name);
-}
+using test_support::block_named;
 
 // A 0.2 x 0.1 m block ("top", 8 kg) on a fixed base, joint 0.2 m long, 0.2 m wide; kn 1e9, ks 4e8.
 Scene block_on_base(double friction_deg = 30) {
@@ -617,15 +607,7 @@ TEST(EffectRegistry, AStressLevelIsScaledWithoutTheStrengthsFloor) {
   EXPECT_EQ(scaled_range_words(stress, ResponseScales{}), "");  // unknown scale: the absolute range
 }
 
-std::pair<int, std::string> run_demcal(const std::string& args) {
-  const std::string command = std::string(DEMCAL_BINARY) + " " + args + " 2>&1";
-  FILE* pipe = popen(command.c_str(), "r");
-  std::string output;
-  char buffer[4096];
-  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
-  const int status = pclose(pipe);
-  return {WEXITSTATUS(status), output};
-}
+using test_support::run_demcal;
 
 TEST(EffectFlags, SceneCommandWritesEveryOption) {
   const auto dir = std::filesystem::temp_directory_path() / ("demcal_effects_" + std::to_string(::getpid()));
@@ -635,7 +617,7 @@ TEST(EffectFlags, SceneCommandWritesEveryOption) {
                       "--tensile-strength 5e3 --compressive-strength 2e7 --crushing-softening 1e-3 --support-kx 1e8 "
                       "--support-kr 1e7 --support-blocks abutment_right --gap-joint voussoir_9/voussoir_10 "
                       "--gap-extrados 1e-3 --beam-kr 1e6 -o " + arch);
-  ASSERT_EQ(r.first, 0) << r.second;
+  ASSERT_EQ(r.exit_code, 0) << r.output;
   const Scene a = load_scene(arch);
   for (const auto& group : {"arch_joints", "abutment_joints"}) {
     const JointMaterial& m = a.joint_groups.at(group);
@@ -655,18 +637,18 @@ TEST(EffectFlags, SceneCommandWritesEveryOption) {
   EXPECT_EQ(a.blocks[a.block_index("voussoir_5")].beam_kr, 1e6);
 
   r = run_demcal("scene wall --support-ky 1e9 --beam-kr 2e6 -o " + wall);
-  ASSERT_EQ(r.first, 0) << r.second;
+  ASSERT_EQ(r.exit_code, 0) << r.output;
   const Scene w = load_scene(wall);
   EXPECT_EQ(w.blocks[w.block_index("base")].support_ky, 1e9);
   EXPECT_EQ(w.blocks[w.block_index("beam")].beam_kr, 2e6);
 
   r = run_demcal("scene arch --friction-residual-deg 40 --slip-softening 1e-3 -o " + arch);
-  EXPECT_NE(r.first, 0);
-  EXPECT_NE(r.second.find("friction_residual_deg: must be in [0, friction_deg = 30.5] degrees, got 40"), std::string::npos)
-      << r.second;
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("friction_residual_deg: must be in [0, friction_deg = 30.5] degrees, got 40"), std::string::npos)
+      << r.output;
   r = run_demcal("scene arch --gap-extrados 1e-3 -o " + arch);
-  EXPECT_NE(r.first, 0);
-  EXPECT_NE(r.second.find("--gap-joint"), std::string::npos) << r.second;
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--gap-joint"), std::string::npos) << r.output;
   std::filesystem::remove_all(dir);
 }
 

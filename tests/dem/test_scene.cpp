@@ -1,6 +1,7 @@
 // Scene JSON, parameters, and the `demcal scene` / `demcal simulate` commands on good and bad input.
 #include "demcal/dem/generators.hpp"
 #include "demcal/dem/simulation.hpp"
+#include "test_support.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -16,20 +17,8 @@ namespace fs = std::filesystem;
 using namespace demcal::dem;
 using nlohmann::json;
 
-struct CommandResult {
-  int exit_code;
-  std::string output;
-};
-
-CommandResult run_demcal(const std::string& args) {
-  const std::string command = std::string(DEMCAL_BINARY) + " " + args + " 2>&1";
-  FILE* pipe = popen(command.c_str(), "r");
-  std::string output;
-  char buffer[4096];
-  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
-  const int status = pclose(pipe);
-  return {WEXITSTATUS(status), output};
-}
+using test_support::CommandResult;
+using test_support::run_demcal;
 
 class SceneFiles : public ::testing::Test {
  protected:

@@ -204,10 +204,7 @@ const std::vector<Entry>& catalogue() {
 
 class BadInput : public ::testing::TestWithParam<Entry> {};
 
-std::string replace_dir(std::string text, const fs::path& dir) {
-  for (size_t at; (at = text.find("{dir}")) != std::string::npos;) text.replace(at, 5, dir.string());
-  return text;
-}
+using test_support::replace_dir;
 
 }  // namespace
 

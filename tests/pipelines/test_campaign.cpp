@@ -29,10 +29,10 @@ using nlohmann::json;
 
 namespace {
 
-fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("campaign", name); }
+fs::path campaign_dir(const std::string& name) { return test_support::fresh_dir("campaign", name); }
 using test_support::read_json;
 
-const std::string& kSimulator = test_support::kToySimulator;
+using test_support::kToySimulator;
 using test_support::python;
 
 
@@ -40,7 +40,7 @@ using test_support::python;
 std::string make_measurement(const fs::path& dir) {
   const std::string path = (dir / "measured.csv").string();
   ProcessOptions o;
-  o.argv = {python(), kSimulator, "2e7", "32", path, "--noise", "20", "--seed", "7"};
+  o.argv = {python(), kToySimulator, "2e7", "32", path, "--noise", "20", "--seed", "7"};
   o.timeout_s = 30;
   EXPECT_TRUE(run_process(o).ok());
   return path;
@@ -54,7 +54,7 @@ json toy_campaign(const fs::path& dir, const std::string& extra_args = "") {
           {"objective", 1},
           {"optimiser", {{"algorithm", "tbpso"}, {"population", 8}, {"iterations", 8}, {"seed", 3}}},
           {"backend", {{"type", "command"},
-                       {"command", python() + " " + kSimulator + " {k} {friction_deg} {output}" + extra_args},
+                       {"command", python() + " " + kToySimulator + " {k} {friction_deg} {output}" + extra_args},
                        {"parallel", 2}}},
           {"output", (dir / "out").string()},
           {"report", false}};
@@ -64,7 +64,7 @@ json toy_campaign(const fs::path& dir, const std::string& extra_args = "") {
 }  // namespace
 
 TEST(Campaign, ExternalCommandCalibrationRecoversTheHiddenParameters) {
-  const auto dir = fresh_dir("recover");
+  const auto dir = campaign_dir("recover");
   auto config_json = toy_campaign(dir);
   config_json["report"] = true;
   const CampaignConfig config = campaign_from_json(config_json, dir.string(), "toy.json");
@@ -102,7 +102,7 @@ TEST(Campaign, ExternalCommandCalibrationRecoversTheHiddenParameters) {
 // folder or a temporary one that is removed, and a parameter the command takes but the set lacks
 // is named. A diagnosis, which switches effects on in the engine, refuses it before any run.
 TEST(Campaign, PredictionRunsTheExternalCommand) {
-  const auto dir = fresh_dir("predict");
+  const auto dir = campaign_dir("predict");
   const CampaignConfig config = campaign_from_json(toy_campaign(dir), dir.string(), "toy.json");
   PredictionOptions options;
   options.work_folder = (dir / "predicted").string();
@@ -149,7 +149,7 @@ TEST(Campaign, PredictionRunsTheExternalCommand) {
 }
 
 TEST(Campaign, HangingAndCrashingRunsAreMarkedFailedAndTheCampaignGoesOn) {
-  const auto dir = fresh_dir("failures");
+  const auto dir = campaign_dir("failures");
   auto config_json = toy_campaign(dir, " --crash-above 30 --hang-above 36");
   config_json["backend"]["timeout_s"] = 1.0;
   config_json["optimiser"] = {{"algorithm", "pso"}, {"population", 6}, {"iterations", 2}, {"seed", 5}};
@@ -192,7 +192,7 @@ TEST(Campaign, HangingAndCrashingRunsAreMarkedFailedAndTheCampaignGoesOn) {
 }
 
 TEST(Campaign, BadInputGivesMessagesNamingTheProblem) {
-  const auto dir = fresh_dir("bad");
+  const auto dir = campaign_dir("bad");
   auto expect_error = [&](json config_json, const std::string& needle) {
     try {
       const CampaignConfig config = campaign_from_json(config_json, dir.string(), "bad.json");
@@ -239,7 +239,7 @@ TEST(Campaign, BadInputGivesMessagesNamingTheProblem) {
 // A case's "solver" lays settings over its scene's (here a generated arch), checked as a scene
 // file's would be; a name it does not know, or a bad value, is named in the message.
 TEST(Campaign, SceneSolverSettingsOverrideTheGeneratedScene) {
-  const auto dir = fresh_dir("solver");
+  const auto dir = campaign_dir("solver");
   const json arch = {{"generator", "arch"}, {"options", {{"contacts_per_joint", 3}}}};
   const auto scene_of = [&](const json& solver) {
     json spec = arch;
@@ -301,7 +301,7 @@ TEST(Campaign, MeasuredColumnsAreMappedToEngineNamesInSI) {
 // kill -9 at random moments, then --resume, several times: the same result.json as an uninterrupted
 // run, and no finished simulation done twice.
 TEST(Campaign, KilledAndResumedCampaignEndsWithTheUninterruptedResult) {
-  const auto dir = fresh_dir("resume");
+  const auto dir = campaign_dir("resume");
   auto campaign = toy_campaign(dir);
   campaign["objective"] = {{"type", 2}, {"smoother", {{"epochs", 40}}}};
   campaign["optimiser"] = {{"algorithm", "tbpso"}, {"population", 6}, {"iterations", 8}, {"seed", 11}};
@@ -385,7 +385,7 @@ TEST(Campaign, KilledAndResumedCampaignEndsWithTheUninterruptedResult) {
 // `mpirun --oversubscribe -n 3 demcal calibrate ... --backend mpi` gives the threads backend's result.
 TEST(Campaign, MpiBackendGivesTheThreadsResult) {
   if (std::system("command -v mpirun > /dev/null 2>&1") != 0) GTEST_SKIP() << "no mpirun";
-  const auto dir = fresh_dir("mpi");
+  const auto dir = campaign_dir("mpi");
   const json campaign = {
       {"name", "mpi-vs-threads"},
       {"scene", {{"generator", "arch"},

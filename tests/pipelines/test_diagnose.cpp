@@ -6,6 +6,8 @@
 #include "demcal/pipelines/diagnose.hpp"
 #include "test_support.hpp"
 
+#include "../test_random.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -44,11 +46,7 @@ EffectCandidate tried_candidate(const std::string& effect, double error, double 
   return c;
 }
 
-double normal(std::mt19937_64& rng) {
-  auto uniform = [&] { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; };
-  const double u1 = uniform(), u2 = uniform();
-  return std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
-}
+using demcal::test_random::normal;
 
 // A softening curve: rises, peaks at x = 4 mm, falls.
 double curve_at(double x) { return 5000 * (x / 4e-3) * std::exp(1 - x / 4e-3); }

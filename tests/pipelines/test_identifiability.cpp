@@ -4,6 +4,8 @@
 #include "test_support.hpp"
 #include "demcal/pipelines/campaign.hpp"
 
+#include "../test_random.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -16,7 +18,7 @@ namespace optimise = demcal::optimise;
 
 namespace {
 
-double uniform(std::mt19937_64& rng) { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; }
+using demcal::test_random::uniform;
 
 // kn in [1e8, 1e10] (log10), friction in [25, 45] degrees; in unit coordinates (a, b) the fitness
 // is the valley a = b: 1 + 50 (a - b)^2 + 0.02 (a - 0.75)^2, within a 5 % band all along its floor.

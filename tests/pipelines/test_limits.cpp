@@ -26,7 +26,7 @@ using test_support::write_text;
 
 using test_support::toy_measured_text;
 
-json toy_campaign(const fs::path& dir) { return test_support::toy_campaign(dir, "limits"); }
+json limits_campaign(const fs::path& dir) { return test_support::toy_campaign(dir, "limits"); }
 
 // A valid scene file (the default arch, 15 blocks) made by the CLI.
 fs::path arch_scene(const fs::path& dir) {
@@ -37,7 +37,7 @@ fs::path arch_scene(const fs::path& dir) {
   return dir / "arch.json";
 }
 
-struct Entry {
+struct LimitCase {
   std::string id;
   // Writes what the entry needs into dir and returns the arguments after `demcal`.
   std::function<std::vector<std::string>(const fs::path& dir)> setup;
@@ -45,7 +45,7 @@ struct Entry {
   std::string environment = {};      // DEMCAL_LIMITS for the run ("" = the defaults)
 };
 
-void PrintTo(const Entry& e, std::ostream* os) { *os << e.id; }
+void PrintTo(const LimitCase& e, std::ostream* os) { *os << e.id; }
 
 // The default arch scene file with `edit` applied to its JSON.
 std::function<std::vector<std::string>(const fs::path&)> simulate_edited(std::function<void(json&)> edit) {
@@ -61,7 +61,7 @@ std::function<std::vector<std::string>(const fs::path&)> simulate_edited(std::fu
 std::function<std::vector<std::string>(const fs::path&)> calibrate_edited(std::function<void(json&)> edit,
                                                                           std::vector<std::string> extra = {}) {
   return [edit, extra](const fs::path& dir) {
-    json campaign = toy_campaign(dir);
+    json campaign = limits_campaign(dir);
     edit(campaign);
     write_text(dir / "campaign.json", campaign.dump(2));
     std::vector<std::string> args{"calibrate", (dir / "campaign.json").string(), "--out", (dir / "out").string(), "--quiet"};
@@ -76,7 +76,7 @@ std::function<std::vector<std::string>(const fs::path&)> command(std::vector<std
 
 const char* kRaise = "raise it with --limit ";
 
-std::vector<Entry> catalogue() {
+std::vector<LimitCase> limit_catalogue() {
   return {
       // ---- scenes: generators (flags) ----
       {"arch_voussoirs", command({"scene", "arch", "--voussoirs", "2000000000", "-o", "{dir}/a.json"}),
@@ -147,14 +147,14 @@ std::vector<Entry> catalogue() {
         "--limit network_weights=N"}},
       {"diagnose_candidate_simulations",
        [](const fs::path& dir) {
-         write_text(dir / "campaign.json", toy_campaign(dir).dump());
+         write_text(dir / "campaign.json", limits_campaign(dir).dump());
          return std::vector<std::string>{"diagnose", (dir / "campaign.json").string(), "--out", (dir / "d").string(),
                                          "--candidate-simulations", "2000000000"};
        },
        {"--candidate-simulations 2000000000", "evaluations exceed the limit of 10000000"}},
       {"study_campaigns",
        [](const fs::path& dir) {
-         write_text(dir / "campaign.json", toy_campaign(dir).dump());
+         write_text(dir / "campaign.json", limits_campaign(dir).dump());
          write_text(dir / "study.json", json{{"campaign", "campaign.json"},
                                              {"algorithms", {{{"algorithm", "pso"}}, {{"algorithm", "ga"}}}},
                                              {"seeds", {1, 2}}}.dump());
@@ -164,7 +164,7 @@ std::vector<Entry> catalogue() {
       {"campaign_file_bytes",
        [](const fs::path& dir) {
          write_text(dir / "measured.csv", toy_measured_text());
-         write_text(dir / "campaign.json", toy_campaign(dir).dump());
+         write_text(dir / "campaign.json", limits_campaign(dir).dump());
          fs::resize_file(dir / "campaign.json", 1ll << 30);
          return std::vector<std::string>{"calibrate", (dir / "campaign.json").string(), "--out", (dir / "out").string()};
        },
@@ -183,12 +183,9 @@ std::vector<Entry> catalogue() {
   };
 }
 
-class Limits : public ::testing::TestWithParam<Entry> {};
+class Limits : public ::testing::TestWithParam<LimitCase> {};
 
-std::string replace_dir(std::string text, const fs::path& dir) {
-  for (size_t at; (at = text.find("{dir}")) != std::string::npos;) text.replace(at, 5, dir.string());
-  return text;
-}
+using test_support::replace_dir;
 
 ProcessResult run_demcal(const std::vector<std::string>& args, const std::string& environment, const fs::path& dir) {
   ProcessOptions o;
@@ -205,7 +202,7 @@ ProcessResult run_demcal(const std::vector<std::string>& args, const std::string
 }  // namespace
 
 TEST_P(Limits, InputOverALimitIsRefusedAtOnceNamingTheOptionValueAndLimit) {
-  const Entry& entry = GetParam();
+  const LimitCase& entry = GetParam();
   const auto dir = test_support::fresh_dir("limits", entry.id);
   write_text(dir / "measured.csv", toy_measured_text());
   const ProcessResult r = run_demcal(entry.setup(dir), entry.environment, dir);
@@ -224,8 +221,8 @@ TEST_P(Limits, InputOverALimitIsRefusedAtOnceNamingTheOptionValueAndLimit) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Catalogue, Limits, ::testing::ValuesIn(catalogue()),
-                         [](const ::testing::TestParamInfo<Entry>& info) { return info.param.id; });
+INSTANTIATE_TEST_SUITE_P(Catalogue, Limits, ::testing::ValuesIn(limit_catalogue()),
+                         [](const ::testing::TestParamInfo<LimitCase>& info) { return info.param.id; });
 
 // A limit raised (or lowered) by --limit or DEMCAL_LIMITS moves the line between refused and
 // accepted by exactly that much: 40 voussoirs and 2 abutments are 42 blocks.

@@ -15,7 +15,7 @@ namespace fs = std::filesystem;
 using namespace demcal::pipelines;
 
 namespace {
-fs::path fresh_dir(const std::string& name) {
+fs::path process_archive_dir(const std::string& name) {
   const fs::path dir = fs::temp_directory_path() / ("demcal-test-pipelines-" + name);
   fs::remove_all(dir);
   fs::create_directories(dir);
@@ -45,7 +45,7 @@ TEST(CommandTemplate, SplitsWithoutAShellAndExpandsPlaceholders) {
 }
 
 TEST(Process, ReportsExitCodeSignalAndMissingProgram) {
-  const auto dir = fresh_dir("process");
+  const auto dir = process_archive_dir("process");
   ProcessOptions o;
   o.argv = {"sh", "-c", "echo hello; echo oops >&2; exit 3"};
   o.stdout_path = (dir / "out.txt").string();
@@ -75,7 +75,7 @@ TEST(Process, ReportsExitCodeSignalAndMissingProgram) {
 }
 
 TEST(Process, TimeoutKillsTheWholeProcessGroup) {
-  const auto dir = fresh_dir("timeout");
+  const auto dir = process_archive_dir("timeout");
   const auto marker = dir / "child.pid";
   ProcessOptions o;
   // The shell starts a grandchild that would outlive a kill of the shell alone.
@@ -103,7 +103,7 @@ TEST(Archive, ParameterKeyIsExactAndOrderFree) {
 }
 
 TEST(Archive, RunsFitnessAndIterationsSurviveReopening) {
-  const auto dir = fresh_dir("archive");
+  const auto dir = process_archive_dir("archive");
   const std::string path = (dir / "a.sqlite").string();
   RunRecord run;
   run.model_hash = "scene1";

@@ -14,6 +14,8 @@
 #include "demcal/smoothing/objective.hpp"
 #include "test_support.hpp"
 
+#include "../test_random.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -44,11 +46,7 @@ dem::ArchOptions coarse_arch() {
 }
 
 // Standard normal deviate from a 64-bit engine (Box-Muller on the top 53 bits: portable).
-double normal(std::mt19937_64& rng) {
-  auto uniform = [&] { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; };
-  const double u1 = uniform(), u2 = uniform();
-  return std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
-}
+using demcal::test_random::normal;
 
 // The truth's recording thinned to one row in 10 with Gaussian noise on every column (SI units);
 // `noise_seed` picks the draw (2024: the measurement that is calibrated).

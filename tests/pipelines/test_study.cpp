@@ -19,26 +19,21 @@ using nlohmann::json;
 
 namespace {
 
-fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("study", name); }
+fs::path study_dir(const std::string& name) { return test_support::fresh_dir("study", name); }
 using test_support::read_json;
 
-const std::string& kSimulator = test_support::kToySimulator;
+using test_support::kToySimulator;
 using test_support::python;
 
 
 
-std::string read_text(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test_support::read_text;
 
 // A toy problem: k = 2e7 N/m, friction 32 deg, 20 N of noise; population 4.
 json toy_study(const fs::path& dir) {
   const std::string measured = (dir / "measured.csv").string();
   ProcessOptions o;
-  o.argv = {python(), kSimulator, "2e7", "32", measured, "--noise", "20", "--seed", "7"};
+  o.argv = {python(), kToySimulator, "2e7", "32", measured, "--noise", "20", "--seed", "7"};
   o.timeout_s = 30;
   EXPECT_TRUE(run_process(o).ok());
   const json campaign = {
@@ -48,7 +43,7 @@ json toy_study(const fs::path& dir) {
                       {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
       {"objective", 1},
       {"optimiser", {{"algorithm", "tbpso"}, {"population", 4}, {"iterations", 9}, {"seed", 1}}},
-      {"backend", {{"type", "command"}, {"command", python() + " " + kSimulator + " {k} {friction_deg} {output}"}, {"parallel", 2}}},
+      {"backend", {{"type", "command"}, {"command", python() + " " + kToySimulator + " {k} {friction_deg} {output}"}, {"parallel", 2}}},
       {"output", "unused"}};
   return {{"campaign", campaign},
           {"algorithms", json::array({"pso", json{{"algorithm", "tbpso"}, {"iterations", 2}},
@@ -63,7 +58,7 @@ StudyConfig study_config(const json& j, const fs::path& dir) { return study_from
 }  // namespace
 
 TEST(Study, WritesTheFiveBestPerMethodStatisticsAndSimulations) {
-  const auto dir = fresh_dir("tables");
+  const auto dir = study_dir("tables");
   const StudyConfig config = study_config(toy_study(dir), dir);
   ASSERT_EQ(config.methods.size(), 3u);
   EXPECT_EQ(config.methods[0].iterations, 3);  // from the "iterations" map
@@ -154,7 +149,7 @@ TEST(Study, WritesTheFiveBestPerMethodStatisticsAndSimulations) {
 }
 
 TEST(Study, BadStudyFilesGiveMessagesNamingTheKey) {
-  const auto dir = fresh_dir("bad");
+  const auto dir = study_dir("bad");
   const json good = toy_study(dir);
   auto expect_error = [&](json j, const std::string& needle) {
     try {
@@ -195,7 +190,7 @@ TEST(Study, BadStudyFilesGiveMessagesNamingTheKey) {
 }
 
 TEST(Study, CommandLineRunsTheStudyFileAndReportsBadInput) {
-  const auto dir = fresh_dir("cli");
+  const auto dir = study_dir("cli");
   json j = toy_study(dir);
   j["algorithms"] = json::array({json{{"algorithm", "tbpso"}, {"iterations", 2}}});
   j["seeds"] = json::array({4, 9});

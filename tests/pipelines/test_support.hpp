@@ -67,6 +67,12 @@ inline fs::path fresh_dir(const std::string& suite, const std::string& name) {
   return dir;
 }
 
+// TEXT with every "{dir}" replaced by DIR.
+inline std::string replace_dir(std::string text, const fs::path& dir) {
+  for (size_t at; (at = text.find("{dir}")) != std::string::npos;) text.replace(at, 5, dir.string());
+  return text;
+}
+
 inline std::string read_text(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream buffer;

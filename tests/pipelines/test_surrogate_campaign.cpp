@@ -26,10 +26,10 @@ using test_support::read_json;
 
 namespace {
 
-fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("surrogate", name); }
+fs::path surrogate_dir(const std::string& name) { return test_support::fresh_dir("surrogate", name); }
 
 // The toy wall's measurement (k 2e7, friction 32°, 20 N of noise drawn with `seed`) in dir/NAME.
-std::string make_measurement(const fs::path& dir, const std::string& name = "measured.csv", int seed = 7) {
+std::string toy_measurement(const fs::path& dir, const std::string& name = "measured.csv", int seed = 7) {
   const std::string path = (dir / name).string();
   ProcessOptions o;
   o.argv = {python(), test_support::kToySimulator, "2e7", "32", path, "--noise", "20", "--seed", std::to_string(seed)};
@@ -39,9 +39,9 @@ std::string make_measurement(const fs::path& dir, const std::string& name = "mea
 }
 
 // The toy wall: failures (a crashed program) above 42 degrees, a surrogate that screens 8 -> 4.
-json toy_campaign(const fs::path& dir, std::uint64_t seed = 3, const std::string& kind = "gp") {
+json surrogate_toy_campaign(const fs::path& dir, std::uint64_t seed = 3, const std::string& kind = "gp") {
   return {{"name", "toy-surrogate"},
-          {"measured", make_measurement(dir)},
+          {"measured", toy_measurement(dir)},
           {"parameters", {{{"name", "k"}, {"lower", 1e6}, {"upper", 1e8}, {"scale", "log"}},
                           {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}}},
           {"objective", 1},
@@ -72,7 +72,7 @@ ProcessResult calibrate(const fs::path& campaign, const fs::path& out, bool resu
 }  // namespace
 
 TEST(SurrogateData, ReadsExactlyTheFinishedRunsOfOneSceneHash) {
-  const auto dir = fresh_dir("adapter");
+  const auto dir = surrogate_dir("adapter");
   RunArchive archive((dir / "a.sqlite").string());
   optimise::ParameterSpace space;
   space.add("kn", 1e8, 1e10, optimise::ParameterSpec::Scale::log10).add("friction_deg", 25, 45).tie("ks", "kn", 2.0);
@@ -126,7 +126,7 @@ TEST(SurrogateData, ReadsExactlyTheFinishedRunsOfOneSceneHash) {
 // Parallel runs are archived in the order they finish; the rows (and every model fitted to them) must
 // not depend on that order.
 TEST(SurrogateData, RowsDoNotDependOnTheOrderRunsFinished) {
-  const auto dir = fresh_dir("finish-order");
+  const auto dir = surrogate_dir("finish-order");
   optimise::ParameterSpace space;
   space.add("kn", 1e8, 1e10, optimise::ParameterSpec::Scale::log10).add("friction_deg", 25, 45);
   const std::vector<std::pair<double, double>> points = {{3e9, 30}, {1e9, 41}, {5e8, 27}, {1e9, 33}};
@@ -200,8 +200,8 @@ class SurrogateKinds : public ::testing::TestWithParam<std::string> {};
 INSTANTIATE_TEST_SUITE_P(SurrogateCampaign, SurrogateKinds, ::testing::Values("gp", "mlp"));
 
 TEST_P(SurrogateKinds, ArchiveAndOptimiserNeverHoldAPrediction) {
-  const auto dir = fresh_dir("never-predicted-" + GetParam());
-  std::ofstream(dir / "campaign.json") << toy_campaign(dir, 3, GetParam()).dump(2);
+  const auto dir = surrogate_dir("never-predicted-" + GetParam());
+  std::ofstream(dir / "campaign.json") << surrogate_toy_campaign(dir, 3, GetParam()).dump(2);
   const auto r = calibrate(dir / "campaign.json", dir / "out", false);
   ASSERT_TRUE(r.ok()) << r.message;
   const json result = read_json(dir / "out" / "result.json");
@@ -251,7 +251,7 @@ TEST_P(SurrogateKinds, ArchiveAndOptimiserNeverHoldAPrediction) {
   }
 
   // A second campaign (another seed) on the same archive: warm from the first one's 36 runs.
-  json second = toy_campaign(dir, 4, GetParam());
+  json second = surrogate_toy_campaign(dir, 4, GetParam());
   std::ofstream(dir / "second.json") << second.dump(2);
   const auto r2 = calibrate(dir / "second.json", dir / "second", false, nullptr, (dir / "out" / "archive.sqlite").string());
   ASSERT_TRUE(r2.ok()) << r2.message;
@@ -264,8 +264,8 @@ TEST_P(SurrogateKinds, ArchiveAndOptimiserNeverHoldAPrediction) {
 // predicted each point before it was simulated. With the default cost ratio the batch may grow,
 // and the result says why.
 TEST_P(SurrogateKinds, BayesRoundsFillTheWorkersAndReportTheirTime) {
-  const auto dir = fresh_dir("bo-batches-" + GetParam());
-  json campaign = toy_campaign(dir, 3, GetParam());
+  const auto dir = surrogate_dir("bo-batches-" + GetParam());
+  json campaign = surrogate_toy_campaign(dir, 3, GetParam());
   campaign["optimiser"] = {{"algorithm", "bo"}, {"population", 8}, {"max_evaluations", 20}, {"seed", 3}};
   campaign["surrogate"] = {{"kind", GetParam()}, {"min_runs", 8}, {"cost_ratio", "inf"}};
   std::ofstream(dir / "campaign.json") << campaign.dump(2);
@@ -301,8 +301,8 @@ TEST_P(SurrogateKinds, BayesRoundsFillTheWorkersAndReportTheirTime) {
 // the same model) are scored when a "bo" campaign starts, and its model trains on them: the design
 // they replace is not simulated.
 TEST(SurrogateCampaign, EarlierRunsOfAnotherObjectiveAreScoredAndTrainTheModel) {
-  const auto dir = fresh_dir("scored-earlier");
-  json campaign = toy_campaign(dir, 3, "gp");
+  const auto dir = surrogate_dir("scored-earlier");
+  json campaign = surrogate_toy_campaign(dir, 3, "gp");
   campaign["optimiser"] = {{"algorithm", "bo"}, {"population", 8}, {"max_evaluations", 20}, {"seed", 3}};
   campaign["surrogate"] = {{"kind", "gp"}, {"min_runs", 8}, {"cost_ratio", "inf"}};
   std::ofstream(dir / "first.json") << campaign.dump(2);
@@ -312,7 +312,7 @@ TEST(SurrogateCampaign, EarlierRunsOfAnotherObjectiveAreScoredAndTrainTheModel) 
   EXPECT_EQ(read_json(dir / "first" / "result.json")["iterations"], 1 + (20 - 8) / 2) << "the design, then rounds of 2";
 
   // Another measurement of the same wall: another objective key, the same runs.
-  campaign["measured"] = make_measurement(dir, "other.csv", 8);
+  campaign["measured"] = toy_measurement(dir, "other.csv", 8);
   std::ofstream(dir / "second.json") << campaign.dump(2);
   const auto second = calibrate(dir / "second.json", dir / "second", false, nullptr, archive);
   ASSERT_TRUE(second.ok()) << second.message;
@@ -333,8 +333,8 @@ TEST(SurrogateCampaign, EarlierRunsOfAnotherObjectiveAreScoredAndTrainTheModel) 
 
 // kill -9 during a screened campaign, then --resume: the result is the uninterrupted one.
 TEST_P(SurrogateKinds, KilledAndResumedEndsWithTheUninterruptedResult) {
-  const auto dir = fresh_dir("resume-" + GetParam());
-  std::ofstream(dir / "campaign.json") << toy_campaign(dir, 5, GetParam()).dump(2);
+  const auto dir = surrogate_dir("resume-" + GetParam());
+  std::ofstream(dir / "campaign.json") << surrogate_toy_campaign(dir, 5, GetParam()).dump(2);
   const std::string log = (dir / "simulator.log").string();
   ::setenv("TOY_SIMULATOR_LOG", log.c_str(), 1);
   auto logged_runs = [&] {
@@ -380,8 +380,8 @@ TEST_P(SurrogateKinds, KilledAndResumedEndsWithTheUninterruptedResult) {
 // `demcal surrogate check` and `train` on a campaign's archive, and a trained model used by
 // `demcal calibrate --surrogate MODEL` (it screens from the first iteration on).
 TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
-  const auto dir = fresh_dir("cli");
-  json campaign = toy_campaign(dir);
+  const auto dir = surrogate_dir("cli");
+  json campaign = surrogate_toy_campaign(dir);
   campaign.erase("surrogate");
   campaign["optimiser"]["max_evaluations"] = 40;
   std::ofstream(dir / "campaign.json") << campaign.dump(2);
@@ -419,7 +419,7 @@ TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
   EXPECT_NE(message.find("0123"), std::string::npos) << message;
 
   // A fresh archive, the trained model: screened from the first batch.
-  json with_model = toy_campaign(dir, 9);
+  json with_model = surrogate_toy_campaign(dir, 9);
   with_model["surrogate"]["model"] = (dir / "model.json").string();
   with_model["optimiser"]["max_evaluations"] = 12;
   std::ofstream(dir / "with-model.json") << with_model.dump(2);
@@ -442,7 +442,7 @@ TEST(SurrogateCli, CheckTrainAndCalibrateWithAModel) {
                       (dir / "mlp-model.json").string()}, "mlp-train.json").ok());
   EXPECT_EQ(read_json(dir / "mlp-model.json")["kind"], "mlp");
   // A campaign given the mlp model takes its kind and screens from the first batch.
-  json with_mlp = toy_campaign(dir, 9);
+  json with_mlp = surrogate_toy_campaign(dir, 9);
   with_mlp["surrogate"].erase("kind");
   with_mlp["surrogate"]["model"] = (dir / "mlp-model.json").string();
   with_mlp["optimiser"]["max_evaluations"] = 12;

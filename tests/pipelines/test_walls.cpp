@@ -21,7 +21,7 @@ using nlohmann::json;
 
 namespace {
 
-fs::path fresh_dir(const std::string& name) { return test_support::fresh_dir("walls", name); }
+fs::path walls_dir(const std::string& name) { return test_support::fresh_dir("walls", name); }
 using test_support::read_json;
 
 const fs::path kWalls = fs::path(DEMCAL_SOURCE_DIR) / "data" / "walls";
@@ -122,7 +122,7 @@ TEST(Walls, EveryBundledCampaignParsesValidatesAndMatchesItsTest) {
 }
 
 TEST(Walls, TinyCampaignOnOneWallRunsEndToEndAndPredictReproducesItsBestFitness) {
-  const auto dir = fresh_dir("tiny");
+  const auto dir = walls_dir("tiny");
   const CampaignConfig config = tiny_wall_campaign(dir / "out");
   RunOptions options;
   options.progress = false;
@@ -190,7 +190,7 @@ TEST(Walls, ACollapsedRunIsScoredOverTheWholeMeasuredCurve) {
 }
 
 TEST(Walls, PredictRejectsUnknownParametersAndMalformedResults) {
-  const auto dir = fresh_dir("bad");
+  const auto dir = walls_dir("bad");
   const CampaignConfig config = tiny_wall_campaign(dir / "out");
   try {
     predict_cases(config, {{"kn", 1e9}, {"ks", 1e9}, {"friction_degrees", 30}});

@@ -3,6 +3,8 @@
 #include "demcal/surrogate/curve_ensemble.hpp"
 #include "demcal/surrogate/surrogate.hpp"
 
+#include "../test_random.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -13,7 +15,7 @@ using namespace demcal::surrogate;
 
 namespace {
 
-double uniform(std::mt19937_64& rng) { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; }
+using demcal::test_random::uniform;
 
 // A family of softening force-displacement curves on 16 points: stiffness a, strength b.
 constexpr int kPoints = 16;

@@ -2,6 +2,8 @@
 #include "demcal/surrogate/gaussian_process.hpp"
 #include "demcal/surrogate/surrogate.hpp"
 
+#include "../test_random.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,11 +13,8 @@ using namespace demcal::surrogate;
 
 namespace {
 
-double uniform(std::mt19937_64& rng) { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; }
-double normal(std::mt19937_64& rng) {
-  const double u1 = uniform(rng), u2 = uniform(rng);
-  return std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
-}
+using demcal::test_random::uniform;
+using demcal::test_random::normal;
 
 double known(const Eigen::VectorXd& x) { return std::sin(6 * x[0]) + 0.5 * x[1] * x[1] + 0.3 * x[0] * x[1]; }
 

@@ -3,6 +3,8 @@
 // coordinate the fitness pins.
 #include "demcal/surrogate/profile.hpp"
 
+#include "../test_random.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -12,7 +14,7 @@ using namespace demcal::surrogate;
 
 namespace {
 
-double uniform(std::mt19937_64& rng) { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1.0p-53; }
+using demcal::test_random::uniform;
 
 // The valley x = y: fitness 1 + 50 (x - y)^2 + 0.02 (x - 0.75)^2 (+ 5 (z - 0.4)^2 in 3-D). Along
 // the floor the fitness stays below 1.0115, inside a 5 % band everywhere; across it the band is
