@@ -43,8 +43,12 @@ SANITIZE_EXCLUDE ?= _NOT_BUILT
 # SANITIZE_EXCLUDE_FILE: a file of further ctest -E patterns, one a line (# comments).
 SANITIZE_EXCLUDE_FILE ?=
 sanitize_exclude_listed = $(if $(SANITIZE_EXCLUDE_FILE),|$(shell grep -v -e '^\#' -e '^$$' $(SANITIZE_EXCLUDE_FILE) | paste -sd'|'))
+# A folder configured with another compiler is configured afresh: on a compiler change CMake
+# resets its cache, the sanitizer option and flags with it.
 test-sanitize:
 	@bash scripts/install-deps.sh $(if $(filter clang%,$(SANITIZE_CC)),clang libclang-rt-dev)
+	@if [ -f $(SANITIZE_BUILD)/CMakeCache.txt ] && ! grep -qx "CMAKE_CXX_COMPILER:[A-Z]*=$$(command -v $(SANITIZE_CXX))" $(SANITIZE_BUILD)/CMakeCache.txt; then \
+	  echo "test-sanitize: $(SANITIZE_BUILD) was configured with another compiler; configuring it afresh"; rm -rf $(SANITIZE_BUILD); fi
 	cmake -S . -B $(SANITIZE_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDEMCAL_SANITIZE=ON -DDEMCAL_BUILD_BENCHMARKS=OFF \
 	  -DCMAKE_C_COMPILER=$(SANITIZE_CC) -DCMAKE_CXX_COMPILER=$(SANITIZE_CXX) "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG"
 	cmake --build $(SANITIZE_BUILD) -j$(JOBS) --target $(SANITIZE_TARGETS)
