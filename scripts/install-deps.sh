@@ -4,7 +4,7 @@
 # Needs root (or sudo) only when something must be installed; prints what it does.
 set -euo pipefail
 packages=(
-  build-essential cmake pkg-config
+  build-essential cmake ninja-build pkg-config
   libeigen3-dev libtorch-dev libnlopt-cxx-dev nlohmann-json3-dev libcli11-dev
   libsqlite3-dev libgtest-dev libbenchmark-dev
   libopenmpi-dev openmpi-bin gnuplot-nox libpagmo-dev
