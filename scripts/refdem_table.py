@@ -100,7 +100,8 @@ def number(v):
 def effect_parameters(d, declared, truth):
     """Each parameter of the chosen effects: value, range (the bounds' check), truth, inside or not.
     An effect added at a further step is read from that step's diagnosis.json, at the value of the
-    fit with every effect (the last step's)."""
+    fit with every effect (the last step's), its range that of its entry in "added" (of its step, or
+    for one added tentatively, of the model with every effect)."""
     steps = {}
     for a in d.get("added", []):
         if a["folder"]:
@@ -112,6 +113,7 @@ def effect_parameters(d, declared, truth):
     if steps:
         last = steps[d["added"][-1]["effect"]]
         final = next(c["params"] for c in last["candidates"] if c["effect"] == d["added"][-1]["effect"])
+    added_bounds = {a["effect"]: a.get("bounds", {}) for a in d.get("added", [])}
     rows = []
     for effect in d["chosen"]:
         step = steps.get(effect, d)
@@ -121,7 +123,7 @@ def effect_parameters(d, declared, truth):
                 continue
             value = final.get(name, value)
             key = name.split(".")[-1]
-            b = c.get("bounds", {}).get(name, {})
+            b = added_bounds.get(effect, {}).get(name) or c.get("bounds", {}).get(name, {})
             lower, upper = b.get("lower"), b.get("upper")
             inside = None
             if key in truth:

@@ -240,10 +240,14 @@ json Diagnosis::to_json() const {
     }
   }
   json added_json = json::array();
-  for (const auto& a : added)
+  for (const auto& a : added) {
+    json bounds = json::object();
+    for (const auto& b : a.bounds) bounds[b.name] = b.to_json();
     added_json.push_back({{"effect", a.effect}, {"target", a.target}, {"parameters", a.parameters},
-                          {"error_before", finite_or_null(a.error_before)}, {"error_after", finite_or_null(a.error_after)},
-                          {"frequency", finite_or_null(a.frequency)}, {"tentative", a.tentative}, {"folder", a.folder}});
+                          {"bounds", bounds}, {"error_before", finite_or_null(a.error_before)},
+                          {"error_after", finite_or_null(a.error_after)}, {"frequency", finite_or_null(a.frequency)},
+                          {"tentative", a.tentative}, {"folder", a.folder}});
+  }
   json removals = json::array();
   for (const auto& r : removal_checks)
     removals.push_back({{"effect", r.effect}, {"criterion", finite_or_null(r.criterion)},

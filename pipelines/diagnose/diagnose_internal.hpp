@@ -252,6 +252,14 @@ void calibrate_candidates(DiagnosisRun& run);          // 4. extension.cpp
 void select_and_search_further(DiagnosisRun& run);     // 5. selection.cpp
 void resample_verdict(DiagnosisRun& run);              // 5c. resampling.cpp
 void bound_accepted_parameters(DiagnosisRun& run);     // 6. ranges.cpp
+// The bounds of each parameter of m.parameter_names into c.bounds (profile_bound: c's fit, `best`,
+// re-simulated on the fitted cases of m.config with one parameter moved, the others re-fitted where
+// that one run rules the value out; the criterion change against c.residuals on `grid`), within the
+// diagnosis's simulation budget. m.config may hold further effects' parameters: they are re-fitted
+// with the base's.
+void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const std::map<std::string, double>& best,
+                             const std::vector<ChannelResidual>& grid, const std::vector<double>& effective_points,
+                             CaseRunner& runner, const DiagnoseOptions& options);
 void add_verdict_notes(DiagnosisRun& run);             // 7. notes.cpp
 // "<case>/<channel> over N %, ..." of channels and the share of their measured range a window
 // covers, in the order given (notes.cpp).

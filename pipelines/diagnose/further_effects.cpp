@@ -19,7 +19,7 @@ namespace {
 Diagnosis::AddedEffect added_effect(const DiagnosisRun& run, const EffectCandidate& c, const std::string& folder,
                                     bool tentative) {
   return {c.effect, c.target, fitted_effect_parameters(c, run.d), run.d.error_before, c.error, folder,
-          tentative ? Diagnosis::kNaN : run.d.frequency.verdict, tentative};
+          tentative ? Diagnosis::kNaN : run.d.frequency.verdict, tentative, c.bounds};
 }
 
 // The next step: the model of `c` (an effect of `run`) as the base, its fit as the base fit, the
@@ -288,10 +288,23 @@ void add_further_effects(DiagnosisRun& run) {
   }
   if (tentative) {
     if (added.size() < 2) return;  // it stays only with a further effect that passes beside it
-    // never bounded alone: its parameters as the fit with the effect beside it has them
+    // never bounded alone: its parameters as the fit with every effect has them, bounded in that
+    // model (each moved with the base's and the other effects' parameters re-fitted)
     EffectCandidate with_all = *first;
     with_all.params = adding->params;
+    with_all.residuals = adding->residuals;
+    with_all.bounds.clear();
+    if (run.options.parameter_bounds) {
+      ExtendedModel model = last->models.at(adding->effect);
+      model.parameter_names = run.models.at(first->effect).parameter_names;
+      model.parameters = run.models.at(first->effect).parameters;
+      progress(run.options, "checking how tightly the data pin the parameters of " + first->effect +
+                                ", added tentatively, in the model with every effect");
+      bound_effect_parameters(with_all, model, last->best_sets.at(adding->effect), last->base.residuals,
+                              last->effective_points, run.runner, run.options);
+    }
     added.front().parameters = fitted_effect_parameters(with_all, run.d);
+    added.front().bounds = with_all.bounds;
   }
   d.added = added;
   d.chosen = in_model;

@@ -58,9 +58,8 @@ double refitted_change(const ExtendedModel& m, const std::map<std::string, doubl
   return std::isfinite(summary.best_value) ? summary.best_value : Diagnosis::kNaN;
 }
 
-// The bounds of every parameter of candidate c's effect (profile_bound: its fit re-simulated on the
-// fitted cases with one parameter moved, the others re-fitted where that one run rules the value
-// out), within the diagnosis's simulation budget.
+}  // namespace
+
 void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const std::map<std::string, double>& best,
                              const std::vector<ChannelResidual>& grid, const std::vector<double>& effective_points,
                              CaseRunner& runner, const DiagnoseOptions& options) {
@@ -96,8 +95,6 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
     c.bounds.push_back(profile_bound(name, best.at(name), values, conditional, refitted, options.evidence));
   }
 }
-
-}  // namespace
 
 void bound_accepted_parameters(DiagnosisRun& run) {
   if (!run.options.parameter_bounds) return;

@@ -192,6 +192,14 @@ TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   const json j = test_support::read_json(dir / "out" / "diagnosis.json");
   for (const char* key : {"base", "noise", "effective_points", "candidates", "chosen", "error_before", "error_after"})
     EXPECT_TRUE(j.contains(key)) << key;
+  // the effect added carries its candidate's bounds, in diagnosis.json too
+  ASSERT_EQ(d.added.size(), 1u);
+  ASSERT_EQ(d.added.front().bounds.size(), c->bounds.size());
+  for (std::size_t i = 0; i < c->bounds.size(); ++i) {
+    const ParameterBound& b = d.added.front().bounds[i];
+    EXPECT_EQ(b.name, c->bounds[i].name);
+    EXPECT_EQ(j["added"][0]["bounds"][b.name]["best"].get<double>(), b.best) << b.name;
+  }
   ASSERT_EQ(j["base"]["further_starts"].size(), d.further_starts.size());
   EXPECT_LE(d.further_starts.size(), static_cast<std::size_t>(DiagnoseOptions{}.candidate_starts - 1));
   EXPECT_EQ(j["frequency"]["verdict"].get<double>(), d.frequency.verdict);

@@ -458,6 +458,9 @@ struct Diagnosis {
     std::string folder;            // "" for the first (this diagnosis's own folder)
     double frequency = kNaN;       // its step's VerdictFrequency::verdict (NaN: added tentatively)
     bool tentative = false;        // added without passing alone (DiagnoseOptions::tentative_effect)
+    // Its parameters' bounds (DiagnoseOptions::parameter_bounds): its candidate's, of the step that
+    // added it; for one added tentatively, taken in the model with every effect of the diagnosis.
+    std::vector<ParameterBound> bounds;
   };
   std::vector<AddedEffect> added;
   // Each effect added, its removal check (removal_criteria): the model with the others (the base
