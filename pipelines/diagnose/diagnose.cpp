@@ -76,6 +76,13 @@ void DiagnoseOptions::Validate() const {
 
 namespace {
 
+// Each bound by its parameter's name (ParameterBound::to_json).
+json bounds_json(const std::vector<ParameterBound>& bounds) {
+  json j = json::object();
+  for (const auto& b : bounds) j[b.name] = b.to_json();
+  return j;
+}
+
 json params_json(const std::map<std::string, double>& params) {
   json j = json::object();
   for (const auto& [k, v] : params) j[k] = finite_or_null(v);
@@ -233,21 +240,14 @@ json Diagnosis::to_json() const {
                           {"simulations", o.simulations}});
       cands.back()["other_targets"] = others;
     }
-    if (!c.bounds.empty()) {
-      json bounds = json::object();
-      for (const auto& b : c.bounds) bounds[b.name] = b.to_json();
-      cands.back()["bounds"] = bounds;
-    }
+    if (!c.bounds.empty()) cands.back()["bounds"] = bounds_json(c.bounds);
   }
   json added_json = json::array();
-  for (const auto& a : added) {
-    json bounds = json::object();
-    for (const auto& b : a.bounds) bounds[b.name] = b.to_json();
+  for (const auto& a : added)
     added_json.push_back({{"effect", a.effect}, {"target", a.target}, {"parameters", a.parameters},
-                          {"bounds", bounds}, {"error_before", finite_or_null(a.error_before)},
+                          {"bounds", bounds_json(a.bounds)}, {"error_before", finite_or_null(a.error_before)},
                           {"error_after", finite_or_null(a.error_after)}, {"frequency", finite_or_null(a.frequency)},
                           {"tentative", a.tentative}, {"folder", a.folder}});
-  }
   json removals = json::array();
   for (const auto& r : removal_checks)
     removals.push_back({{"effect", r.effect}, {"criterion", finite_or_null(r.criterion)},

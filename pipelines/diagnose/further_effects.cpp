@@ -295,9 +295,10 @@ void add_further_effects(DiagnosisRun& run) {
     with_all.residuals = adding->residuals;
     with_all.bounds.clear();
     if (run.options.parameter_bounds) {
+      const ExtendedModel& own = run.models.at(first->effect);
       ExtendedModel model = last->models.at(adding->effect);
-      model.parameter_names = run.models.at(first->effect).parameter_names;
-      model.parameters = run.models.at(first->effect).parameters;
+      model.parameter_names = own.parameter_names;
+      model.parameters = own.parameters;
       progress(run.options, "checking how tightly the data pin the parameters of " + first->effect +
                                 ", added tentatively, in the model with every effect");
       bound_effect_parameters(with_all, model, last->best_sets.at(adding->effect), last->base.residuals,
