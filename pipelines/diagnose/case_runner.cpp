@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <mutex>
 #include <thread>
 
 namespace demcal::pipelines::detail {
@@ -56,7 +57,10 @@ double overall_noise(const std::vector<ChannelResidual>& residuals) {
 }
 
 void progress(const DiagnoseOptions& o, const std::string& line) {
-  if (o.progress) std::cerr << "diagnose: " << line << std::endl;
+  static std::mutex one_line_at_a_time;  // stages run side by side print whole lines
+  if (!o.progress) return;
+  const std::lock_guard lock(one_line_at_a_time);
+  std::cerr << "diagnose: " + line + "\n" << std::flush;
 }
 
 bool is_held_out(const std::string& case_name, const std::vector<std::string>& held_out_cases) {
@@ -104,9 +108,10 @@ std::vector<std::vector<CasePrediction>> CaseRunner::simulate_all(const std::vec
     for (int w = 0; w < workers; ++w) pool.emplace_back(work);
     for (auto& t : pool) t.join();
   }
-  simulation_s_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  add_times(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 0);
   for (std::size_t i = 0; i < requests.size(); ++i) {
     if (errors[i]) std::rethrow_exception(errors[i]);
+    const std::lock_guard lock(mutex_);
     simulations_ += static_cast<long>(simulated[i].size());
     simulated_this_session_ += static_cast<long>(simulated[i].size());
   }
@@ -179,10 +184,53 @@ void CaseRunner::add_runs_of(const CaseRunner& other) {
 }
 
 void CaseRunner::add_campaign(const CampaignResult& r) {
-  simulations_ += r.simulations;
-  simulated_this_session_ += r.simulated_this_session;
-  simulation_s_ += r.simulation_time_s;
-  model_s_ += r.model_time_s;
+  {
+    const std::lock_guard lock(mutex_);
+    simulations_ += r.simulations;
+    simulated_this_session_ += r.simulated_this_session;
+  }
+  add_times(r.simulation_time_s, r.model_time_s);
+}
+
+void CaseRunner::add_times(double simulation_s, double model_s) {
+  const std::lock_guard lock(mutex_);
+  (shared_ ? shared_simulation_s_ : simulation_s_) += simulation_s;
+  (shared_ ? shared_model_s_ : model_s_) += model_s;
+}
+
+void CaseRunner::side_by_side(const std::vector<std::function<void()>>& tasks, bool together) {
+  std::vector<std::exception_ptr> errors(tasks.size());
+  const auto run = [&](std::size_t i) {
+    try {
+      tasks[i]();
+    } catch (...) {
+      errors[i] = std::current_exception();
+    }
+  };
+  const int slots = std::min(kTasksPerWorker * workers_, static_cast<int>(tasks.size()));
+  // one worker: the tasks' runs one at a time; a task's own tasks: in its slot
+  if (!together || workers_ <= 1 || slots <= 1 || shared_) {
+    for (std::size_t i = 0; i < tasks.size(); ++i) run(i);
+  } else {
+    const auto start = std::chrono::steady_clock::now();
+    shared_ = true;
+    std::atomic<std::size_t> next{0};
+    std::vector<std::thread> pool;
+    for (int w = 0; w < slots; ++w)
+      pool.emplace_back([&] {
+        for (std::size_t i; (i = next++) < tasks.size();) run(i);
+      });
+    for (auto& t : pool) t.join();
+    shared_ = false;
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double spent = shared_simulation_s_ + shared_model_s_;
+    const double model_share = spent > 0 ? shared_model_s_ / spent : 0;
+    simulation_s_ += wall * (1 - model_share);
+    model_s_ += wall * model_share;
+    shared_simulation_s_ = shared_model_s_ = 0;
+  }
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
 }
 
 std::vector<double> stacked(const std::vector<ChannelResidual>& base, const std::vector<ChannelResidual>* other) {

@@ -16,8 +16,11 @@
 #include "demcal/pipelines/diagnose.hpp"
 #include "demcal/pipelines/predict.hpp"
 
+#include <atomic>
 #include <filesystem>
+#include <functional>
 #include <map>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -90,6 +93,18 @@ class CaseRunner {
   long simulated_this_session() const { return simulated_this_session_; }
   void add_campaign(const CampaignResult& r);
   void add_runs_of(const CaseRunner& other);  // another runner's counts and times (a further step's)
+
+  // Runs `tasks` side by side, all at once up to kTasksPerWorker per worker (together), or one
+  // after another in their order (not together: a total simulation budget, which each task reads
+  // at its start, then holds as in a diagnosis without side-by-side stages). Tasks may call this
+  // runner and run campaigns; each writes only its own results, which the caller merges in task
+  // order, so the results are those of the tasks run one by one. One task's waits (its round's
+  // slowest run, its model's fits) are filled by the others' runs, and no task is left to run
+  // alone at the end while the others' cores idle. Side by side, the stage's wall time counts
+  // once, shared between simulations and models in the proportion the tasks spent in each.
+  // Rethrows the first exception in task order once every task has ended.
+  void side_by_side(const std::vector<std::function<void()>>& tasks, bool together);
+  static constexpr int kTasksPerWorker = 4;  // each task's own rounds use every worker
   // This session's seconds waiting for simulations (direct runs and the calibrations') and in the
   // calibrations' models (surrogate fits and search).
   double simulation_seconds() const { return simulation_s_; }
@@ -99,6 +114,11 @@ class CaseRunner {
   std::map<std::string, smoothing::Curve> measured_;  // by case name
   std::vector<std::string> held_out_cases_;
   int workers_ = 1;
+  // Side by side (side_by_side): counts under the lock, times summed per task until the stage ends.
+  std::mutex mutex_;
+  std::atomic<bool> shared_{false};
+  double shared_simulation_s_ = 0, shared_model_s_ = 0;
+  void add_times(double simulation_s, double model_s);
   long simulations_ = 0;
   long simulated_this_session_ = 0;  // direct runs and the calibrations' runs not read from the archive
   double simulation_s_ = 0, model_s_ = 0;

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <optional>
 
@@ -257,41 +258,91 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
 
 namespace {
 
-// An effect's other targets whose signatures its best one does not clearly beat (close_targets):
-// each calibrated alike; `c` keeps the fit of lower error, c.other_targets the others.
-void calibrate_close_targets(DiagnosisRun& run, EffectCandidate& c) {
+// One calibration of stage 4: a candidate at its best-signature target (other == nullptr) or at one
+// of the targets whose signatures that one does not clearly beat (close_targets), calibrated alike.
+// Each writes only its own fields, so that the calibrations can run side by side.
+struct CandidateCalibration {
+  EffectCandidate* candidate = nullptr;
+  const ProbedTarget* other = nullptr;
+  EffectCandidate fit;                  // the calibration's candidate fields
+  std::map<std::string, double> set;    // its best set
+  std::vector<ParameterSet> searched;   // every set it evaluated
+  bool below_cut = false;               // tried below the top effects, its signature close to theirs
+  bool ran = false;                     // false: over the budget when its turn came
+};
+
+// Where a candidate is calibrated: null for its best-signature target, then each close target.
+std::vector<const ProbedTarget*> close_targets_of(DiagnosisRun& run, const std::string& effect) {
+  std::vector<const ProbedTarget*> targets = {nullptr};
+  for (const auto& other : run.close_targets[effect]) targets.push_back(&other);
+  return targets;
+}
+
+// Runs one calibration: its budget taken when it starts (within the diagnosis's total budget).
+void run_calibration(DiagnosisRun& run, CandidateCalibration& job, bool quiet) {
   const DiagnoseOptions& options = run.options;
-  for (auto& other : run.close_targets[c.effect]) {
-    const long other_budget = run.within_budget(run.per_candidate);
-    if (other_budget < 2 * run.config.optimiser.population) break;
-    const fs::path other_folder =
-        fs::path(options.out) / "candidates" / (c.effect + "-at-" + file_safe(other.candidate.target));
-    progress(options, "calibrating base + " + c.effect + " at " + other.candidate.target + " too (signature " +
-                          format_number(100 * other.candidate.signature_score, 2) + " % against " +
-                          format_number(100 * c.signature_score, 2) + " % at " + c.target + ", " +
-                          std::to_string(other_budget) + " simulations) in " + other_folder.string());
-    EffectCandidate alt = other.candidate;
-    alt.tried = true;
-    std::map<std::string, double> alt_set;
-    try {
-      calibrate_candidate(alt, alt_set, other.model, run.config, run.d.base_params, options, other_budget, other_folder,
-                          other.warm, run.base.residuals, run.runner, run.d.further_starts, &run.searched[c.effect]);
-    } catch (const std::exception& ex) {
-      progress(options, "the calibration of " + c.effect + " at " + alt.target + " failed: " + ex.what());
-    }
-    const bool better = std::isfinite(alt.error) && !(alt.error >= c.error);
-    EffectCandidate& loser = better ? c : alt;
-    std::vector<EffectCandidate::OtherTarget> others = std::move(c.other_targets);
-    others.push_back({loser.target, loser.signature_score, loser.error, loser.simulations});
-    const long simulations = c.simulations + alt.simulations;
-    if (better) {
-      c = std::move(alt);
-      run.models[c.effect] = other.model;
-      run.best_sets[c.effect] = alt_set;
-    }
-    c.other_targets = std::move(others);
-    c.simulations = simulations;
+  EffectCandidate& c = *job.candidate;
+  const long budget = run.within_budget(run.per_candidate);
+  if (budget < 2 * run.config.optimiser.population) {
+    job.fit.reason = "over the simulation budget";
+    return;
   }
+  job.ran = true;
+  job.fit = job.other ? job.other->candidate : c;
+  job.fit.tried = true;
+  const fs::path folder = fs::path(options.out) / "candidates" /
+                          (job.other ? c.effect + "-at-" + file_safe(job.other->candidate.target) : c.effect);
+  const std::string runs = std::to_string(budget) + " simulations";
+  progress(options, "calibrating base + " + c.effect +
+                        (job.other ? " at " + job.other->candidate.target + " too (signature " +
+                                         format_number(100 * job.other->candidate.signature_score, 2) + " % against " +
+                                         format_number(100 * c.signature_score, 2) + " % at " + c.target + ", " + runs + ")"
+                                   : " (" + runs + (job.below_cut ? ", its signature close to the last one tried" : "") + ")") +
+                        " in " + folder.string());
+  DiagnoseOptions own = options;
+  own.progress = options.progress && !quiet;  // side by side: a line when it ends, not each round
+  try {
+    calibrate_candidate(job.fit, job.set, job.other ? job.other->model : run.models.at(c.effect), run.config,
+                        run.d.base_params, own, budget, folder, job.other ? job.other->warm : run.warm_starts.at(c.effect),
+                        run.base.residuals, run.runner, run.d.further_starts, &job.searched);
+  } catch (const std::exception& ex) {
+    job.fit.reason = std::string("its calibration failed: ") + ex.what();
+    if (job.other) progress(options, "the calibration of " + c.effect + " at " + job.fit.target + " failed: " + ex.what());
+  }
+  if (quiet)
+    progress(options, "base + " + c.effect + (job.fit.target.empty() ? "" : " at " + job.fit.target) + ": error " +
+                          format_number(job.fit.error, 3) + " N after " + std::to_string(job.fit.simulations) +
+                          " simulations");
+}
+
+// The calibrations' results into the diagnosis, in their order: a candidate's own fit, then each
+// close target's, the one of lower error kept with the others listed (EffectCandidate::other_targets).
+void merge_calibration(DiagnosisRun& run, CandidateCalibration& job) {
+  EffectCandidate& c = *job.candidate;
+  if (!job.ran) {
+    if (!job.other) c.reason = job.fit.reason;
+    return;
+  }
+  auto& searched = run.searched[c.effect];
+  searched.insert(searched.end(), job.searched.begin(), job.searched.end());
+  if (!job.other) {
+    c = std::move(job.fit);
+    run.best_sets[c.effect] = std::move(job.set);
+    return;
+  }
+  EffectCandidate& alt = job.fit;
+  const bool better = std::isfinite(alt.error) && !(alt.error >= c.error);
+  EffectCandidate& loser = better ? c : alt;
+  std::vector<EffectCandidate::OtherTarget> others = std::move(c.other_targets);
+  others.push_back({loser.target, loser.signature_score, loser.error, loser.simulations});
+  const long simulations = c.simulations + alt.simulations;
+  if (better) {
+    c = std::move(alt);
+    run.models[c.effect] = job.other->model;
+    run.best_sets[c.effect] = std::move(job.set);
+  }
+  c.other_targets = std::move(others);
+  c.simulations = simulations;
 }
 
 }  // namespace
@@ -310,6 +361,9 @@ void calibrate_candidates(DiagnosisRun& run) {
       text += (text.empty() ? "" : ", ") + p.name + " " + format_number(start.at(p.name), 4);
     progress(options, "a further start of the candidates' searches: " + text);
   }
+  // Which calibrations run follows from the signatures alone: the top `limit` effects, those whose
+  // signature comes close to the last of them, and each one's close targets.
+  std::vector<CandidateCalibration> jobs;
   int tried = 0;
   double last_tried_signature = 0;  // of the limit-th effect tried
   for (auto& c : run.d.candidates) {
@@ -319,26 +373,21 @@ void calibrate_candidates(DiagnosisRun& run) {
       c.reason = "ranked below the " + std::to_string(limit) + " effects tried";
       continue;
     }
-    const long budget = run.within_budget(run.per_candidate);
-    if (budget < 2 * run.config.optimiser.population) {
-      c.reason = "over the simulation budget";
-      continue;
-    }
-    const fs::path folder = fs::path(options.out) / "candidates" / c.effect;
-    const std::string why = below_cut ? ", its signature close to the last one tried" : "";
-    progress(options, "calibrating base + " + c.effect + " (" + std::to_string(budget) + " simulations" + why + ") in " +
-                          folder.string());
     if (++tried == limit) last_tried_signature = c.signature_score;
-    c.tried = true;
-    try {
-      calibrate_candidate(c, run.best_sets[c.effect], run.models.at(c.effect), run.config, run.d.base_params, options,
-                          budget, folder, run.warm_starts[c.effect], run.base.residuals, run.runner, run.d.further_starts,
-                          &run.searched[c.effect]);
-    } catch (const std::exception& ex) {
-      c.reason = std::string("its calibration failed: ") + ex.what();
+    for (const ProbedTarget* other : close_targets_of(run, c.effect)) {
+      CandidateCalibration& job = jobs.emplace_back();
+      job.candidate = &c;
+      job.other = other;
+      job.below_cut = below_cut && other == nullptr;
     }
-    calibrate_close_targets(run, c);
   }
+  // Without a total budget every calibration's budget is known before any runs: side by side.
+  const bool together = options.max_simulations <= 0;
+  const bool quiet = together && jobs.size() > 1;
+  std::vector<std::function<void()>> tasks;
+  for (auto& job : jobs) tasks.push_back([&run, &job, quiet] { run_calibration(run, job, quiet); });
+  run.runner.side_by_side(tasks, together);
+  for (auto& job : jobs) merge_calibration(run, job);
 }
 
 }  // namespace detail

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <memory>
 
 namespace demcal::pipelines::detail {
@@ -80,10 +81,11 @@ ModelEffect model_effect(const Diagnosis& step) {
 // The base model of `run` with `effects` switched on in order (none: the base alone), calibrated
 // from `full` (the complete set of the model with every effect: the start, and the caps) into
 // `folder`, its fit judged on the grid of `with_all`. The fit's fields as calibrate_candidate sets
-// them (its complete set into `best_set`); reason set where it failed.
+// them (its complete set into `best_set`); reason set where it failed. `quiet`: no line per round
+// of its search (one of several side by side).
 EffectCandidate fit_with(DiagnosisRun& run, const std::vector<ModelEffect>& effects,
                          const std::map<std::string, double>& full, const std::vector<ChannelResidual>& with_all,
-                         const fs::path& folder, std::map<std::string, double>& best_set) {
+                         const fs::path& folder, std::map<std::string, double>& best_set, bool quiet = false) {
   CampaignConfig config = run.config;
   for (std::size_t i = 0; i + 1 < effects.size(); ++i) {
     const ExtendedModel m = extend(config, *effects[i].effect, effects[i].targets, effects[i].scales,
@@ -107,8 +109,10 @@ EffectCandidate fit_with(DiagnosisRun& run, const std::vector<ModelEffect>& effe
     c.reason = "over the simulation budget";
     return c;
   }
+  DiagnoseOptions options = run.options;
+  options.progress = options.progress && !quiet;
   try {
-    calibrate_candidate(c, best_set, m, config, full, run.options, budget, folder, full, with_all, run.runner);
+    calibrate_candidate(c, best_set, m, config, full, options, budget, folder, full, with_all, run.runner);
   } catch (const std::exception& ex) {
     c.reason = std::string("its calibration failed: ") + ex.what();
   }
@@ -159,19 +163,27 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
   const DiagnosisRun& last = *steps.back();
   const std::vector<ChannelResidual>& with_all = effects.back().fit->residuals;
   const auto& full = last.best_sets.at(effects.back().fit->effect);
-  std::vector<EffectCandidate> without;
+  std::vector<EffectCandidate> without(effects.size());
   std::vector<std::map<std::string, double>> sets(effects.size());
+  std::vector<fs::path> folders;
+  std::vector<std::function<void()>> tasks;  // the models without each effect, side by side without a total budget
+  for (std::size_t i = 0; i < effects.size(); ++i) {
+    folders.push_back(fs::path(run.options.out) / ("without-" + effects[i].effect->name));
+    progress(run.options, "removal check: the model without " + effects[i].effect->name + " calibrated in " +
+                              folders.back().string());
+    tasks.push_back([&, i, quiet = effects.size() > 1 && run.options.max_simulations <= 0] {
+      std::vector<ModelEffect> others = effects;
+      others.erase(others.begin() + static_cast<std::ptrdiff_t>(i));
+      without[i] = fit_with(run, others, full, with_all, folders[i], sets[i], quiet);
+    });
+  }
+  run.runner.side_by_side(tasks, run.options.max_simulations <= 0);
   std::vector<std::vector<ChannelResidual>> residuals;
   std::vector<int> parameters;
   for (std::size_t i = 0; i < effects.size(); ++i) {
-    std::vector<ModelEffect> others = effects;
-    others.erase(others.begin() + static_cast<std::ptrdiff_t>(i));
-    const fs::path folder = fs::path(run.options.out) / ("without-" + effects[i].effect->name);
-    progress(run.options, "removal check: the model without " + effects[i].effect->name + " calibrated in " + folder.string());
-    without.push_back(fit_with(run, others, full, with_all, folder, sets[i]));
-    residuals.push_back(std::isfinite(without.back().error) ? without.back().residuals : std::vector<ChannelResidual>{});
+    residuals.push_back(std::isfinite(without[i].error) ? without[i].residuals : std::vector<ChannelResidual>{});
     parameters.push_back(effects[i].fit->effect_parameters);
-    d.removal_checks.push_back({effects[i].effect->name, Diagnosis::kNaN, without.back().error, folder.string(), false});
+    d.removal_checks.push_back({effects[i].effect->name, Diagnosis::kNaN, without[i].error, folders[i].string(), false});
   }
   int drop = -1;
   const std::vector<double> criteria = removal_criteria(with_all, residuals, parameters, run.options.evidence, drop);

@@ -5,8 +5,10 @@
 #include "demcal/optimise/optimiser.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <functional>
+#include <optional>
 
 namespace demcal::pipelines::detail {
 
@@ -74,26 +76,39 @@ void bound_effect_parameters(EffectCandidate& c, const ExtendedModel& m, const s
   const ChangeAt change_at = [&](const std::map<std::string, double>& params) {
     return change_of(runner.evaluate(fitted, params, &grid));
   };
+  // Each parameter's check is a task of its own: side by side without a total budget (one
+  // parameter's re-fits, a run at a time, beside another's), else in order until one is over it.
+  std::vector<std::optional<ParameterBound>> bounds(m.parameter_names.size());
+  std::atomic<bool> over_budget{false};
+  std::vector<std::function<void()>> tasks;
   for (std::size_t i = 0; i < m.parameter_names.size(); ++i) {
     const std::string& name = m.parameter_names[i];
     if (!best.count(name)) continue;
-    const auto values = bound_trial_values(m.parameters[i], best.at(name), parameter_cap(name, m.parameters[i], best));
-    if (!within_budget(static_cast<long>(values.size()))) return;  // over the budget: the rest stay unchecked
-    std::vector<RunRequest> trials;  // each value with the others at the best, run at once
-    for (double v : values) {
-      trials.push_back({&fitted, best, &grid});
-      trials.back().params[name] = v;
-    }
-    const std::vector<Evaluation> trial_runs = runner.evaluate_all(trials);
-    const auto conditional = [&](double v) {
-      return change_of(trial_runs[static_cast<std::size_t>(std::find(values.begin(), values.end(), v) - values.begin())]);
-    };
-    const auto refitted = [&](double v) {
-      if (options.profile_simulations == 0 || !within_budget(options.profile_simulations)) return Diagnosis::kNaN;
-      return refitted_change(m, best, name, v, change_at, options.profile_simulations);
-    };
-    c.bounds.push_back(profile_bound(name, best.at(name), values, conditional, refitted, options.evidence));
+    tasks.push_back([&, i, name] {
+      const auto values = bound_trial_values(m.parameters[i], best.at(name), parameter_cap(name, m.parameters[i], best));
+      if (over_budget || !within_budget(static_cast<long>(values.size()))) {
+        over_budget = true;  // the rest stay unchecked
+        return;
+      }
+      std::vector<RunRequest> trials;  // each value with the others at the best, run at once
+      for (double v : values) {
+        trials.push_back({&fitted, best, &grid});
+        trials.back().params[name] = v;
+      }
+      const std::vector<Evaluation> trial_runs = runner.evaluate_all(trials);
+      const auto conditional = [&](double v) {
+        return change_of(trial_runs[static_cast<std::size_t>(std::find(values.begin(), values.end(), v) - values.begin())]);
+      };
+      const auto refitted = [&](double v) {
+        if (options.profile_simulations == 0 || !within_budget(options.profile_simulations)) return Diagnosis::kNaN;
+        return refitted_change(m, best, name, v, change_at, options.profile_simulations);
+      };
+      bounds[i] = profile_bound(name, best.at(name), values, conditional, refitted, options.evidence);
+    });
   }
+  runner.side_by_side(tasks, options.max_simulations <= 0);
+  for (auto& b : bounds)
+    if (b) c.bounds.push_back(std::move(*b));
 }
 
 void bound_accepted_parameters(DiagnosisRun& run) {

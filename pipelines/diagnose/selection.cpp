@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <set>
 
 namespace demcal::pipelines {
@@ -339,9 +340,11 @@ void nothing_to_explain(DiagnosisRun& run) {
 }
 
 // A further search of `name`'s fit, of `budget` simulations with another seed, whose surrogate
-// trains on the first search's runs; the better fit is kept (c.continued says which).
-void search_further(DiagnosisRun& run, const std::string& name, long budget, double explained) {
-  const DiagnoseOptions& options = run.options;
+// trains on the first search's runs; the better fit is kept (c.continued says which). Writes only
+// `name`'s candidate, best set and searched sets (whose entries exist), so that several run side by
+// side; `quiet`: no line per round of its search.
+void search_further(DiagnosisRun& run, const std::string& name, long budget, double explained, bool quiet) {
+  DiagnoseOptions options = run.options;
   auto& c = *std::find_if(run.d.candidates.begin(), run.d.candidates.end(), [&](const auto& x) { return x.effect == name; });
   const fs::path folder = fs::path(options.out) / "candidates" / (c.effect + "-continued");
   progress(options, c.effect + "'s fit stays above the noise and scatter (" + format_number(c.error, 3) + " against " +
@@ -353,9 +356,10 @@ void search_further(DiagnosisRun& run, const std::string& name, long budget, dou
   std::map<std::string, double> next_set;
   ExtendedModel further = run.models.at(c.effect);
   further.config.optimiser.seed += 1;
+  options.progress = options.progress && !quiet;
   try {
     calibrate_candidate(next, next_set, further, run.config, run.d.base_params, options, budget, folder,
-                        run.best_sets.at(c.effect), run.base.residuals, run.runner, {}, &run.searched[c.effect]);
+                        run.best_sets.at(c.effect), run.base.residuals, run.runner, {}, &run.searched.at(c.effect));
   } catch (const std::exception& ex) {
     progress(options, "the continued search of " + c.effect + " failed: " + ex.what());
   }
@@ -363,10 +367,13 @@ void search_further(DiagnosisRun& run, const std::string& name, long budget, dou
   const long simulations = c.simulations + continued.simulations;
   if (continued.kept) {
     c = std::move(next);
-    run.best_sets[c.effect] = next_set;
+    run.best_sets.at(c.effect) = next_set;
   }
   c.simulations = simulations;
   c.continued = continued;
+  if (quiet)
+    progress(run.options, c.effect + "'s continued search: error " + format_number(continued.error_found, 3) + " N after " +
+                              std::to_string(continued.simulations) + " simulations" + (continued.kept ? ", kept" : ""));
 }
 
 }  // namespace
@@ -401,10 +408,16 @@ void select_and_search_further(DiagnosisRun& run) {
                             "over --max-simulations");
       break;
     }
+    // side by side: each within the budget checked above for all of them
+    std::vector<std::function<void()>> tasks;
     for (const auto& name : names) {
       searched_further.insert(name);
-      search_further(run, name, budget, explained);
+      run.best_sets[name];  // the entries each search writes, made before any runs
+      run.searched[name];
+      const bool quiet = names.size() > 1;
+      tasks.push_back([&run, name, budget, explained, quiet] { search_further(run, name, budget, explained, quiet); });
     }
+    run.runner.side_by_side(tasks, true);
     run.effective_points = score_candidates(d);
     select_effect(d, options);
   }

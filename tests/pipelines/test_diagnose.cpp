@@ -1410,6 +1410,35 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
   EXPECT_TRUE(fs::exists(dir / "out" / "candidates" / "support-compliance" / "result.json"));
 }
 
+// Without a total budget the calibrations of a stage (the candidates and their close targets, the
+// searches continued, the removal checks) and the bounds' re-fits run side by side; with one, one
+// after another, each taking its budget when it starts. On a budget that never binds the two give
+// the same diagnosis, number for number: each task writes only its own results, merged in order.
+TEST(DiagnoseLoop, StagesSideBySideGiveTheDiagnosisOfOneAfterAnother) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "side-by-side");
+  const json j = small_search_campaign(dir, "side-by-side");
+  const auto diagnosis_json = [&](const std::string& name, long max_simulations) {
+    DiagnoseOptions o;
+    o.out = (dir / name).string();
+    o.effects = {"support-compliance", "joint-gap", "friction-softening"};
+    o.candidates = 3;
+    o.candidate_simulations = 8;
+    o.profile_simulations = 2;
+    o.max_simulations = max_simulations;
+    o.progress = false;
+    const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "side-by-side.json"), o);
+    EXPECT_EQ(d.status, CampaignStatus::completed) << d.message;
+    EXPECT_GE(std::count_if(d.candidates.begin(), d.candidates.end(), [](const EffectCandidate& c) { return c.tried; }), 2)
+        << d.verdict;
+    json written = d.to_json();
+    for (const char* timed : {"timing", "wall_time_s", "session"}) written.erase(timed);
+    std::string text = written.dump();
+    for (std::size_t at; (at = text.find(o.out)) != std::string::npos;) text.replace(at, o.out.size(), "OUT");
+    return text;
+  };
+  EXPECT_EQ(diagnosis_json("together", 0), diagnosis_json("in-order", 1000000));
+}
+
 // A gauge measured to travel twenty times farther than any run of the model: under the paper's
 // window the refined base fit is compared over the twentieth its gauge reaches, so the diagnosis
 // refines it again comparing every channel over its measured range, compares so from there on, and
@@ -1671,7 +1700,8 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
 
 // A diagnosis killed during a candidate's calibration and run again with --resume ends with the
 // diagnosis an uninterrupted run gives: the calibrations read their finished runs from the archive,
-// and the total budget (--max-simulations) counts those runs as the uninterrupted run did.
+// and the total budget (--max-simulations) counts those runs as the uninterrupted run did. Without
+// a budget, the candidates' calibrations killed side by side resume alike.
 TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
   const fs::path dir = test_support::fresh_dir("diagnose", "resume");
   const dem::ArchOptions arch = cli_arch();
@@ -1681,37 +1711,51 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
                                 {{"name", "friction_deg"}, {"lower", 25}, {"upper", 45}}},
                                {{"ks", 0.9e9}});
   std::ofstream(dir / "campaign.json") << j.dump(2);
-  const auto command = [&](const std::string& out) {
-    return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " + (dir / out).string() +
-           " --effects support-compliance,crushing-cap --candidate-simulations 12 --max-simulations 72 --no-report";
-  };
-  ASSERT_EQ(std::system((command("whole") + " > /dev/null 2>&1").c_str()), 0);
-  // killed (SIGKILL, nothing flushed) as the first candidate's calibration starts, which the
-  // progress lines announce
-  const std::string log = (dir / "killed.log").string();
-  const std::string killed = "sh -c '" + command("killed") + " > /dev/null 2> " + log + " & pid=$!; while kill -0 $pid 2>/dev/null && ! grep -q \"calibrating base +\" " +
-                             log + "; do sleep 0.01; done; kill -9 $pid; wait $pid; exit 0'";
-  ASSERT_EQ(std::system(killed.c_str()), 0);
-  ASSERT_FALSE(fs::exists(dir / "killed" / "diagnosis.json")) << "the run ended before it was killed";
-  ASSERT_EQ(std::system(("grep -q \"calibrating base +\" " + log).c_str()), 0) << "killed before its candidates";
-  ASSERT_EQ(std::system((command("killed") + " --quiet --resume > /dev/null 2>&1").c_str()), 0);
+  for (const bool budget : {true, false}) {
+    SCOPED_TRACE(budget ? "--max-simulations 72" : "no total budget");
+    const std::string variant = budget ? "" : "-side-by-side";
+    const auto command = [&](const std::string& out) {
+      return std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() + " --out " +
+             (dir / (out + variant)).string() + " --effects support-compliance,crushing-cap --candidate-simulations 12" +
+             (budget ? " --max-simulations 72" : "") + " --no-report";
+    };
+    ASSERT_EQ(std::system((command("whole") + " > /dev/null 2>&1").c_str()), 0);
+    // killed (SIGKILL, nothing flushed) as the first candidate's calibration starts, which the
+    // progress lines announce
+    const std::string log = (dir / ("killed" + variant + ".log")).string();
+    const std::string killed = "sh -c '" + command("killed") + " > /dev/null 2> " + log + " & pid=$!; while kill -0 $pid 2>/dev/null && ! grep -q \"calibrating base +\" " +
+                               log + "; do sleep 0.01; done; kill -9 $pid; wait $pid; exit 0'";
+    ASSERT_EQ(std::system(killed.c_str()), 0);
+    ASSERT_FALSE(fs::exists(dir / ("killed" + variant) / "diagnosis.json")) << "the run ended before it was killed";
+    ASSERT_EQ(std::system(("grep -q \"calibrating base +\" " + log).c_str()), 0) << "killed before its candidates";
+    ASSERT_EQ(std::system((command("killed") + " --quiet --resume > /dev/null 2>&1").c_str()), 0);
 
-  json whole = test_support::read_json(dir / "whole" / "diagnosis.json");
-  json resumed = test_support::read_json(dir / "killed" / "diagnosis.json");
-  // the budget binds: one candidate calibrated, the other left out, every run within it
-  std::vector<bool> tried;
-  for (const auto& c : whole["candidates"]) tried.push_back(c["tried"].get<bool>());
-  EXPECT_EQ(tried, (std::vector<bool>{true, false})) << whole["candidates"].dump();
-  EXPECT_LE(whole["simulations"].get<long>(), 72);
-  // what the resumed session simulated itself: less than the whole, the rest read from the archive
-  EXPECT_LT(resumed["session"]["simulated"].get<long>(), whole["session"]["simulated"].get<long>());
-  EXPECT_EQ(resumed["simulations"], whole["simulations"]);
-  for (json* d : {&whole, &resumed}) {
-    d->erase("wall_time_s");
-    d->erase("timing");
-    d->erase("session");
+    json whole = test_support::read_json(dir / ("whole" + variant) / "diagnosis.json");
+    json resumed = test_support::read_json(dir / ("killed" + variant) / "diagnosis.json");
+    // with the budget binding: one candidate calibrated, the other left out, every run within it;
+    // without: both, side by side
+    std::vector<bool> tried;
+    for (const auto& c : whole["candidates"]) tried.push_back(c["tried"].get<bool>());
+    EXPECT_EQ(tried, (std::vector<bool>{true, !budget})) << whole["candidates"].dump();
+    if (budget) EXPECT_LE(whole["simulations"].get<long>(), 72);
+    // what the resumed session simulated itself: less than the whole, the rest read from the archive
+    EXPECT_LT(resumed["session"]["simulated"].get<long>(), whole["session"]["simulated"].get<long>());
+    EXPECT_EQ(resumed["simulations"], whole["simulations"]);
+    for (json* d : {&whole, &resumed}) {
+      d->erase("wall_time_s");
+      d->erase("timing");
+      d->erase("session");
+    }
+    // the same, its folders named alike
+    const auto text = [&](const json& d, const std::string& out) {
+      std::string t = d.dump();
+      const std::string folder = (dir / (out + variant)).string();
+      for (std::size_t at; (at = t.find(folder)) != std::string::npos;) t.replace(at, folder.size(), "OUT");
+      return t;
+    };
+    EXPECT_EQ(text(resumed, "killed"), text(whole, "whole"))
+        << "the resumed diagnosis differs from the uninterrupted one: " << json::diff(whole, resumed).dump();
   }
-  EXPECT_EQ(resumed, whole) << "the resumed diagnosis differs from the uninterrupted one: " << json::diff(whole, resumed).dump();
 }
 
 // The second half of DiagnoseLoop.AFitLeftAboveTheFloorIsSearchedFurther: no effect accepted while
