@@ -104,7 +104,9 @@ class CaseRunner {
   // once, shared between simulations and models in the proportion the tasks spent in each.
   // Rethrows the first exception in task order once every task has ended.
   void side_by_side(const std::vector<std::function<void()>>& tasks, bool together);
-  static constexpr int kTasksPerWorker = 4;  // each task's own rounds use every worker
+  // Tasks at once per worker, at most: each task's rounds already use every worker, so more would
+  // only add threads.
+  static constexpr int kTasksPerWorker = 4;
   // This session's seconds waiting for simulations (direct runs and the calibrations') and in the
   // calibrations' models (surrogate fits and search).
   double simulation_seconds() const { return simulation_s_; }
