@@ -198,6 +198,11 @@ void CaseRunner::add_times(double simulation_s, double model_s) {
   (shared_ ? shared_model_s_ : model_s_) += model_s;
 }
 
+bool CaseRunner::runs_together(std::size_t tasks, bool together) const {
+  // one worker: the tasks' runs one at a time; a task's own tasks: in its slot
+  return together && workers_ > 1 && tasks > 1 && !shared_;
+}
+
 void CaseRunner::side_by_side(const std::vector<std::function<void()>>& tasks, bool together) {
   std::vector<std::exception_ptr> errors(tasks.size());
   const auto run = [&](std::size_t i) {
@@ -207,15 +212,14 @@ void CaseRunner::side_by_side(const std::vector<std::function<void()>>& tasks, b
       errors[i] = std::current_exception();
     }
   };
-  const int slots = std::min(kTasksPerWorker * workers_, static_cast<int>(tasks.size()));
-  // one worker: the tasks' runs one at a time; a task's own tasks: in its slot
-  if (!together || workers_ <= 1 || slots <= 1 || shared_) {
+  if (!runs_together(tasks.size(), together)) {
     for (std::size_t i = 0; i < tasks.size(); ++i) run(i);
   } else {
     const auto start = std::chrono::steady_clock::now();
     shared_ = true;
     std::atomic<std::size_t> next{0};
     std::vector<std::thread> pool;
+    const int slots = std::min(kTasksPerWorker * workers_, static_cast<int>(tasks.size()));
     for (int w = 0; w < slots; ++w)
       pool.emplace_back([&] {
         for (std::size_t i; (i = next++) < tasks.size();) run(i);

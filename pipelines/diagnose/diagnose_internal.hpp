@@ -104,6 +104,9 @@ class CaseRunner {
   // once, shared between simulations and models in the proportion the tasks spent in each.
   // Rethrows the first exception in task order once every task has ended.
   void side_by_side(const std::vector<std::function<void()>>& tasks, bool together);
+  // Whether side_by_side runs `tasks` tasks at once (more than one, together, more than one worker,
+  // not inside another task): its tasks then print no line per round of their searches.
+  bool runs_together(std::size_t tasks, bool together) const;
   // Tasks at once per worker, at most: each task's rounds already use every worker, so more would
   // only add threads.
   static constexpr int kTasksPerWorker = 4;

@@ -293,12 +293,12 @@ void run_calibration(DiagnosisRun& run, CandidateCalibration& job, bool quiet) {
   const fs::path folder = fs::path(options.out) / "candidates" /
                           (job.other ? c.effect + "-at-" + file_safe(job.other->candidate.target) : c.effect);
   const std::string runs = std::to_string(budget) + " simulations";
-  progress(options, "calibrating base + " + c.effect +
-                        (job.other ? " at " + job.other->candidate.target + " too (signature " +
-                                         format_number(100 * job.other->candidate.signature_score, 2) + " % against " +
-                                         format_number(100 * c.signature_score, 2) + " % at " + c.target + ", " + runs + ")"
-                                   : " (" + runs + (job.below_cut ? ", its signature close to the last one tried" : "") + ")") +
-                        " in " + folder.string());
+  const std::string why =
+      job.other ? " at " + job.other->candidate.target + " too (signature " +
+                      format_number(100 * job.other->candidate.signature_score, 2) + " % against " +
+                      format_number(100 * c.signature_score, 2) + " % at " + c.target + ", " + runs + ")"
+                : " (" + runs + (job.below_cut ? ", its signature close to the last one tried" : "") + ")";
+  progress(options, "calibrating base + " + c.effect + why + " in " + folder.string());
   DiagnoseOptions own = options;
   own.progress = options.progress && !quiet;  // side by side: a line when it ends, not each round
   try {
@@ -383,7 +383,7 @@ void calibrate_candidates(DiagnosisRun& run) {
   }
   // Without a total budget every calibration's budget is known before any runs: side by side.
   const bool together = options.max_simulations <= 0;
-  const bool quiet = together && jobs.size() > 1;
+  const bool quiet = run.runner.runs_together(jobs.size(), together);
   std::vector<std::function<void()>> tasks;
   for (auto& job : jobs) tasks.push_back([&run, &job, quiet] { run_calibration(run, job, quiet); });
   run.runner.side_by_side(tasks, together);

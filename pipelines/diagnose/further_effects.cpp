@@ -167,17 +167,19 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
   std::vector<std::map<std::string, double>> sets(effects.size());
   std::vector<fs::path> folders;
   std::vector<std::function<void()>> tasks;  // the models without each effect, side by side without a total budget
+  const bool together = run.options.max_simulations <= 0;
+  const bool quiet = run.runner.runs_together(effects.size(), together);
   for (std::size_t i = 0; i < effects.size(); ++i) {
     folders.push_back(fs::path(run.options.out) / ("without-" + effects[i].effect->name));
     progress(run.options, "removal check: the model without " + effects[i].effect->name + " calibrated in " +
                               folders.back().string());
-    tasks.push_back([&, i, quiet = effects.size() > 1 && run.options.max_simulations <= 0] {
+    tasks.push_back([&, i] {
       std::vector<ModelEffect> others = effects;
       others.erase(others.begin() + static_cast<std::ptrdiff_t>(i));
       without[i] = fit_with(run, others, full, with_all, folders[i], sets[i], quiet);
     });
   }
-  run.runner.side_by_side(tasks, run.options.max_simulations <= 0);
+  run.runner.side_by_side(tasks, together);
   std::vector<std::vector<ChannelResidual>> residuals;
   std::vector<int> parameters;
   for (std::size_t i = 0; i < effects.size(); ++i) {

@@ -410,11 +410,11 @@ void select_and_search_further(DiagnosisRun& run) {
     }
     // side by side: each within the budget checked above for all of them
     std::vector<std::function<void()>> tasks;
+    const bool quiet = run.runner.runs_together(names.size(), true);
     for (const auto& name : names) {
       searched_further.insert(name);
       run.best_sets[name];  // the entries each search writes, made before any runs
       run.searched[name];
-      const bool quiet = names.size() > 1;
       tasks.push_back([&run, name, budget, explained, quiet] { search_further(run, name, budget, explained, quiet); });
     }
     run.runner.side_by_side(tasks, true);
