@@ -5,16 +5,21 @@ declared effects and truths): one diagnosis per record, then the table of docs/d
 its range against the truth, the error before and after against the noise, simulations and wall time.
 
 usage: refdem_table.py DEMCAL_BINARY OUT_DIR [--records A-control-1,A-support-1,...]
-                       [--realisations in_contact:0,all:1,...] [--window common|measured] [-- FLAGS...]
+                       [--realisations in_contact:0,all:1,...] [--window common|measured] [--read-only]
+                       [-- FLAGS...]
 
 FLAGS after `--` go to every `demcal diagnose` (none: its defaults). Each record gets
 OUT_DIR/<record>/ (campaign.json, the diagnosis); a finished one (diagnosis.json present) is read,
 not run again, so the table resumes. Writes OUT_DIR/table.json and prints the markdown table.
+--read-only tabulates the finished diagnoses alone (the others as "did not finish"), without running
+any and writing no table.json: a table of a study still running in the same OUT_DIR.
 
 --realisations: each record on each round-off realisation of the engine (FACES:K, the campaign
 scene's solver with time_step_faces FACES and time_step_safety 0.5 x (1 + K x 1e-14), as
 tests/pipelines/test_support.hpp), in OUT_DIR/<record>/<FACES_K>/; the table then has one row per
-record, its verdict on each realisation and how many agree with the first.
+record: its verdict on each realisation, how many agree with the first and how many are right, how
+many of the stated ranges hold the truth (over every realisation, parameters with a declared truth),
+and the spread of the simulations and wall time.
 
 --window: the campaigns' objective window ("common", the paper's, or "measured"; docs/smoothing.md);
 default: the bundled campaigns' own.
@@ -75,11 +80,11 @@ def campaign_for(record, folder, realisation=None, window=None):
     return path
 
 
-def diagnose(binary, record, out, flags, realisation=None, window=None):
+def diagnose(binary, record, out, flags, realisation=None, window=None, run=True):
     folder = os.path.join(out, record, realisation.replace(":", "_")) if realisation else os.path.join(out, record)
-    os.makedirs(folder, exist_ok=True)
     result = os.path.join(folder, "diag", "diagnosis.json")
-    if not os.path.exists(result):
+    if run and not os.path.exists(result):
+        os.makedirs(folder, exist_ok=True)
         campaign = campaign_for(record, folder, realisation, window)
         start = time.time()
         with open(os.path.join(folder, "diagnose.log"), "w") as log:
@@ -185,17 +190,27 @@ def markdown(rows):
 
 def realisation_markdown(realisations, rows_by_record):
     """One row per record: its verdict on each realisation, right or not, and how many agree."""
-    out = ["| record | " + " | ".join(realisations) + " | same verdict | right |",
-           "| --- | " + " | ".join("---" for _ in realisations) + " | --- | --- |"]
+    out = ["| record | " + " | ".join(realisations) + " | same verdict | right | truth in range | simulations | wall (s) |",
+           "| --- | " + " | ".join("---" for _ in realisations) + " | --- | --- | --- | --- | --- |"]
     stable = 0
+    held = stated = 0
     for record, rows in rows_by_record.items():
         verdicts = [verdict_of(r) + ("" if r["right"] else " (wrong)") for r in rows]
         same = sum(verdict_of(r) == verdict_of(rows[0]) for r in rows)
-        stable += same == len(rows)
-        out.append("| %s | %s | %d of %d | %d of %d |" % (record, " | ".join(verdicts), same, len(rows),
-                                                           sum(r["right"] for r in rows), len(rows)))
+        stable += same == len(rows) and all(r["outcome"] != "did_not_finish" for r in rows)
+        ranges = [p["inside"] for r in rows for p in r["parameters"] if p["inside"] is not None]
+        held += sum(ranges)
+        stated += len(ranges)
+        finished = [r for r in rows if r["outcome"] != "did_not_finish"]
+        spread = lambda key, form: "–" if not finished else "–".join(
+            sorted({form % min(r[key] for r in finished), form % max(r[key] for r in finished)}, key=float))
+        out.append("| %s | %s | %d of %d | %d of %d | %s | %s | %s |" % (
+            record, " | ".join(verdicts), same, len(rows), sum(r["right"] for r in rows), len(rows),
+            "%d of %d" % (sum(ranges), len(ranges)) if ranges else "–", spread("simulations", "%d"),
+            spread("wall_s", "%.0f")))
     out.append("")
-    out.append("%d of %d records with the same verdict on every realisation." % (stable, len(rows_by_record)))
+    out.append("%d of %d records with the same verdict on every realisation; the truth inside %d of %d stated ranges." % (
+        stable, len(rows_by_record), held, stated))
     return "\n".join(out)
 
 
@@ -211,22 +226,22 @@ def main():
     parser.add_argument("--records", default=",".join(RECORDS))
     parser.add_argument("--realisations", default="")
     parser.add_argument("--window", choices=["common", "measured"])
+    parser.add_argument("--read-only", action="store_true")
     args = parser.parse_args(argv)
+    run = not args.read_only
     binary = os.path.abspath(args.binary)
     records = args.records.split(",")
-    if not args.realisations:
-        rows = [judged(r, diagnose(binary, r, args.out, flags, window=args.window)) for r in records]
+    table = {"flags": flags, "window": args.window}
+    if args.realisations:
+        table["realisations"] = args.realisations.split(",")
+        table["rows"] = {r: [dict(judged(r, diagnose(binary, r, args.out, flags, x, args.window, run)), realisation=x)
+                             for x in table["realisations"]] for r in records}
+    else:
+        table["rows"] = [judged(r, diagnose(binary, r, args.out, flags, window=args.window, run=run)) for r in records]
+    if run:
         with open(os.path.join(args.out, "table.json"), "w") as f:
-            json.dump({"flags": flags, "window": args.window, "rows": rows}, f, indent=2)
-        print(markdown(rows))
-        return
-    realisations = args.realisations.split(",")
-    by_record = {r: [dict(judged(r, diagnose(binary, r, args.out, flags, x, args.window)), realisation=x) for x in realisations]
-                 for r in records}
-    with open(os.path.join(args.out, "table.json"), "w") as f:
-        json.dump({"flags": flags, "window": args.window, "realisations": realisations, "rows": by_record}, f, indent=2)
-    print(realisation_markdown(realisations, by_record))
-
+            json.dump(table, f, indent=2)
+    print(realisation_markdown(table["realisations"], table["rows"]) if args.realisations else markdown(table["rows"]))
 
 if __name__ == "__main__":
     main()
