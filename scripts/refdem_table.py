@@ -188,26 +188,31 @@ def markdown(rows):
     return "\n".join(out)
 
 
+def spread(values, form):
+    """"low–high" of `values` in `form`, one value where they print alike, "–" when there are none."""
+    if not values:
+        return "–"
+    low, high = form % min(values), form % max(values)
+    return low if low == high else low + "–" + high
+
+
 def realisation_markdown(realisations, rows_by_record):
     """One row per record: its verdict on each realisation, right or not, and how many agree."""
     out = ["| record | " + " | ".join(realisations) + " | same verdict | right | truth in range | simulations | wall (s) |",
            "| --- | " + " | ".join("---" for _ in realisations) + " | --- | --- | --- | --- | --- |"]
-    stable = 0
-    held = stated = 0
+    stable = held = stated = 0
     for record, rows in rows_by_record.items():
         verdicts = [verdict_of(r) + ("" if r["right"] else " (wrong)") for r in rows]
         same = sum(verdict_of(r) == verdict_of(rows[0]) for r in rows)
-        stable += same == len(rows) and all(r["outcome"] != "did_not_finish" for r in rows)
+        finished = [r for r in rows if r["outcome"] != "did_not_finish"]
+        stable += same == len(rows) == len(finished)
         ranges = [p["inside"] for r in rows for p in r["parameters"] if p["inside"] is not None]
         held += sum(ranges)
         stated += len(ranges)
-        finished = [r for r in rows if r["outcome"] != "did_not_finish"]
-        spread = lambda key, form: "–" if not finished else "–".join(
-            sorted({form % min(r[key] for r in finished), form % max(r[key] for r in finished)}, key=float))
         out.append("| %s | %s | %d of %d | %d of %d | %s | %s | %s |" % (
             record, " | ".join(verdicts), same, len(rows), sum(r["right"] for r in rows), len(rows),
-            "%d of %d" % (sum(ranges), len(ranges)) if ranges else "–", spread("simulations", "%d"),
-            spread("wall_s", "%.0f")))
+            "%d of %d" % (sum(ranges), len(ranges)) if ranges else "–",
+            spread([r["simulations"] for r in finished], "%d"), spread([r["wall_s"] for r in finished], "%.0f")))
     out.append("")
     out.append("%d of %d records with the same verdict on every realisation; the truth inside %d of %d stated ranges." % (
         stable, len(rows_by_record), held, stated))
@@ -242,6 +247,7 @@ def main():
         with open(os.path.join(args.out, "table.json"), "w") as f:
             json.dump(table, f, indent=2)
     print(realisation_markdown(table["realisations"], table["rows"]) if args.realisations else markdown(table["rows"]))
+
 
 if __name__ == "__main__":
     main()
