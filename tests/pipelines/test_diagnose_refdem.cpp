@@ -2,8 +2,8 @@
 // contact discretisation, damping and effect laws than the engine that calibrates them, as measured
 // data are. The control and a friction softening below the noise need no effect; a compliant
 // right abutment is named there, with its stiffness and its bounds, every stage of the loop checked
-// on the way. Shortened searches (two candidates, no further search; the abutment's base 30 runs)
-// keep each within three minutes; the full table over every record is a benchmark
+// on the way. Shortened searches (two candidates, no further search) keep each within three
+// minutes; the full table over every record is a benchmark
 // (scripts/refdem_table.py, docs/diagnose.md). Each runs on the round-off realisation
 // DEMCAL_TEST_REALISATION names, the softening on the one after it.
 #include "demcal/pipelines/diagnose.hpp"
@@ -24,14 +24,11 @@ namespace {
 
 const fs::path kRecords = fs::path(DEMCAL_SOURCE_DIR) / "data" / "refdem-arch";
 
-// A-campaign.json on `record` on the given round-off realisation, its base calibration shortened
-// to `base_simulations` (0: the campaign's own).
-CampaignConfig record_campaign(const std::string& record, const fs::path& dir, const Realisation& realisation,
-                               int base_simulations = 30) {
+// A-campaign.json on `record` on the given round-off realisation.
+CampaignConfig record_campaign(const std::string& record, const fs::path& dir, const Realisation& realisation) {
   json j = test_support::read_json(kRecords / "A-campaign.json");
   j["measured"]["file"] = (kRecords / (record + ".csv")).string();
   j["output"] = (dir / "base-campaign").string();
-  if (base_simulations > 0) j["optimiser"]["max_evaluations"] = base_simulations;
   j["scene"]["solver"] = realisation.solver();
   return campaign_from_json(j, kRecords.string(), record);
 }
@@ -63,7 +60,7 @@ void expect_no_effect_needed(const std::string& record, const Realisation& reali
   const fs::path dir = test_support::fresh_dir("diagnose", "refdem-" + record + "-" + realisation.name());
   DiagnoseOptions options = shortened(dir, {}, false, false);
   options.candidate_simulations = candidate_simulations;
-  const Diagnosis d = run_diagnosis(record_campaign(record, dir, realisation, 0), options);
+  const Diagnosis d = run_diagnosis(record_campaign(record, dir, realisation), options);
   EXPECT_EQ(d.outcome, DiagnosisOutcome::no_effect_needed) << d.verdict;
   EXPECT_TRUE(d.chosen.empty()) << d.verdict;
   EXPECT_NE(d.headline.find("No effect needed: "), std::string::npos) << d.headline;
@@ -127,12 +124,16 @@ TEST_P(RefdemNextRealisation, ASofteningBelowTheNoiseIsNotTakenForAnEffect) {
 // with a joint gap on offer too (the rival whose fit comes closest): both effects probed, ranked,
 // calibrated through the campaign machinery into the diagnosis's one archive, re-simulated on the
 // base grid, judged and reported; support compliance is named at the right abutment (not the
-// left), its horizontal stiffness within a factor 2 of the truth and inside what its bounds do not
-// rule out, the error lowered, the choice reached by most resamples, and the base re-fitted from
-// its fit without it clearly worse (the removal check). (The base friction is not compared with
-// the other code's: the two codes' friction laws differ, and the fits end at 40-45°.) The candidates
-// search with the default budget: the gap at a hinge, its search started from other base fits too,
-// ties the support at 30 or 40 runs each (61 against 73 N, 73 against 76 N) and falls behind at 80.
+// left), the truth of its horizontal stiffness inside what its bounds do not rule out, the error
+// lowered, the choice reached by most resamples, and the base re-fitted from its fit without it
+// clearly worse (the removal check). Its best kx is not compared with the truth: the record's
+// horizontal spring is fitted by the three springs together, on some realisations by the
+// rotational and vertical ones at their lower ends with kx left open (not pinned by the data).
+// (The base friction is not compared with the other code's: the two codes' friction laws differ,
+// and the fits end at 40-45°.) The base calibration has the campaign's budget, the candidates the
+// default: with 30 base runs the verdict was undecided on all:-1 (a tapered gap beside the hinge
+// within the noise of the support); at 30 or 40 runs per candidate the gap, its search started from
+// other base fits too, ties the support (61 against 73 N, 73 against 76 N) and falls behind at 80.
 TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   const fs::path dir = test_support::fresh_dir("diagnose", "refdem-support-" + GetParam().name());
   constexpr double kx_truth = 2e6;
@@ -154,8 +155,7 @@ TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   const auto c = std::find_if(d.candidates.begin(), d.candidates.end(),
                               [](const EffectCandidate& x) { return x.effect == "support-compliance"; });
   EXPECT_EQ(c->target, "abutment_right");
-  const double kx = c->params.at("abutment_right.support_kx");
-  EXPECT_NEAR(std::log(kx / kx_truth), 0, std::log(2.0)) << d.headline;
+  EXPECT_NE(d.headline.find("support_kx"), std::string::npos) << d.headline;  // with its range, or as not pinned
   EXPECT_LT(d.error_after, d.error_before);
   EXPECT_EQ(d.frequency.resamples, DiagnoseOptions{}.resamples);
   EXPECT_GE(d.frequency.verdict, DiagnoseOptions{}.verdict_share);
