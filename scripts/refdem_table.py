@@ -47,7 +47,8 @@ TRUTH = {
     "A-softening": (["friction-softening"], {"kn": 3.0e9, "ks": 1.3e9, "friction_deg": 34,
                                              "friction_loss_deg": 8, "slip_softening": 5e-4}),
     "A-support": (["support-compliance"], {"kn": 3.4e9, "ks": 1.3e9, "friction_deg": 31.5, "support_kx": 2e6}),
-    "A-gap": (["joint-gap"], {"kn": 3.1e9, "ks": 1.2e9, "friction_deg": 31.8, "gap_opening": 8e-4}),
+    # 0.8 mm open at the intrados, closed at the extrados: gap_taper -1 (beyond -1 the same wedge)
+    "A-gap": (["joint-gap"], {"kn": 3.1e9, "ks": 1.2e9, "friction_deg": 31.8, "gap_opening": 8e-4, "gap_taper": -1}),
     "A-closure": (["joint-closure"], {"kn": 2.0e9, "ks": 1.1e9, "friction_deg": 31.2, "closure_max": 1.5e-4}),
     "A-closure-support": (["joint-closure", "support-compliance"],
                           {"kn": 2.2e9, "ks": 1.0e9, "friction_deg": 31.6, "closure_max": 1e-4, "support_kx": 1.5e6}),
