@@ -28,6 +28,9 @@ default: the bundled campaigns' own.
 record whose diagnosis says "no effect needed" with the base fit within the noise (no candidate
 calibrated, or the final fit, a base re-fitted by the removal check, at most the noise) is counted
 right too, and marked so (the README: an effect may not stand above the noise for a calibrated base).
+A realisation table marks each verdict that is not right: "(wrong)" where it names an effect the
+record does not declare, "(k of n declared)" where it names some of the declared effects and no
+other, "(missed)" where it names none.
 """
 import argparse
 import json
@@ -161,8 +164,26 @@ def judged(record, d):
             "wall_s": d["timing"]["wall_s"], "right": bool(right), "within_noise": bool(declared and within_noise)}
 
 
+# How the verdict's first words read for an outcome that names no effect (diagnosis.json "outcome").
+OUTCOME_WORDS = {"unexplained": "no effect found", "undecided": "undecided", "no_effect_needed": "no effect needed"}
+
+
 def verdict_of(row):
-    return ", ".join(row["chosen"]) if row["chosen"] else row["outcome"].replace("_", " ")
+    if row["chosen"]:
+        return ", ".join(row["chosen"])
+    return OUTCOME_WORDS.get(row["outcome"], row["outcome"].replace("_", " "))
+
+
+def miss_of(row):
+    """"" for a right row; otherwise how it is wrong: an effect named that the record does not declare
+    ("wrong"), some of the declared effects named and no other ("k of n declared"), or none ("missed")."""
+    if row["right"] or row["outcome"] == "did_not_finish":
+        return ""
+    if any(e not in row["declared"] for e in row["chosen"]):
+        return " (wrong)"
+    if row["chosen"]:
+        return " (%d of %d declared)" % (len(row["chosen"]), len(row["declared"]))
+    return " (missed)"
 
 
 def markdown(rows):
@@ -201,12 +222,15 @@ def realisation_markdown(realisations, rows_by_record):
     """One row per record: its verdict on each realisation, right or not, and how many agree."""
     out = ["| record | " + " | ".join(realisations) + " | same verdict | right | truth in range | simulations | wall (s) |",
            "| --- | " + " | ".join("---" for _ in realisations) + " | --- | --- | --- | --- | --- |"]
-    stable = held = stated = 0
+    stable = held = stated = right = wrong = diagnoses = 0
     for record, rows in rows_by_record.items():
-        verdicts = [verdict_of(r) + ("" if r["right"] else " (wrong)") for r in rows]
+        verdicts = [verdict_of(r) + miss_of(r) for r in rows]
         same = sum(verdict_of(r) == verdict_of(rows[0]) for r in rows)
         finished = [r for r in rows if r["outcome"] != "did_not_finish"]
         stable += same == len(rows) == len(finished)
+        diagnoses += len(finished)
+        right += sum(r["right"] for r in finished)
+        wrong += sum(miss_of(r) == " (wrong)" for r in finished)
         ranges = [p["inside"] for r in rows for p in r["parameters"] if p["inside"] is not None]
         held += sum(ranges)
         stated += len(ranges)
@@ -215,8 +239,9 @@ def realisation_markdown(realisations, rows_by_record):
             "%d of %d" % (sum(ranges), len(ranges)) if ranges else "–",
             spread([r["simulations"] for r in finished], "%d"), spread([r["wall_s"] for r in finished], "%.0f")))
     out.append("")
-    out.append("%d of %d records with the same verdict on every realisation; the truth inside %d of %d stated ranges." % (
-        stable, len(rows_by_record), held, stated))
+    out.append("%d of %d records with the same verdict on every realisation; %d of %d diagnoses right, %d naming an "
+               "effect the record does not declare; the truth inside %d of %d stated ranges." % (
+                   stable, len(rows_by_record), right, diagnoses, wrong, held, stated))
     return "\n".join(out)
 
 
