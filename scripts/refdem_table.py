@@ -174,12 +174,16 @@ def verdict_of(row):
     return OUTCOME_WORDS.get(row["outcome"], row["outcome"].replace("_", " "))
 
 
+def names_undeclared(row):
+    return any(e not in row["declared"] for e in row["chosen"])
+
+
 def miss_of(row):
     """"" for a right row; otherwise how it is wrong: an effect named that the record does not declare
     ("wrong"), some of the declared effects named and no other ("k of n declared"), or none ("missed")."""
     if row["right"] or row["outcome"] == "did_not_finish":
         return ""
-    if any(e not in row["declared"] for e in row["chosen"]):
+    if names_undeclared(row):
         return " (wrong)"
     if row["chosen"]:
         return " (%d of %d declared)" % (len(row["chosen"]), len(row["declared"]))
@@ -230,7 +234,7 @@ def realisation_markdown(realisations, rows_by_record):
         stable += same == len(rows) == len(finished)
         diagnoses += len(finished)
         right += sum(r["right"] for r in finished)
-        wrong += sum(miss_of(r) == " (wrong)" for r in finished)
+        wrong += sum(names_undeclared(r) for r in finished)
         ranges = [p["inside"] for r in rows for p in r["parameters"] if p["inside"] is not None]
         held += sum(ranges)
         stated += len(ranges)
