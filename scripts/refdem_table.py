@@ -233,13 +233,14 @@ def realisation_markdown(realisations, rows_by_record):
         finished = [r for r in rows if r["outcome"] != "did_not_finish"]
         stable += same == len(rows) == len(finished)
         diagnoses += len(finished)
-        right += sum(r["right"] for r in finished)
+        record_right = sum(r["right"] for r in finished)
+        right += record_right
         wrong += sum(names_undeclared(r) for r in finished)
         ranges = [p["inside"] for r in rows for p in r["parameters"] if p["inside"] is not None]
         held += sum(ranges)
         stated += len(ranges)
         out.append("| %s | %s | %d of %d | %d of %d | %s | %s | %s |" % (
-            record, " | ".join(verdicts), same, len(rows), sum(r["right"] for r in rows), len(rows),
+            record, " | ".join(verdicts), same, len(rows), record_right, len(rows),
             "%d of %d" % (sum(ranges), len(ranges)) if ranges else "–",
             spread([r["simulations"] for r in finished], "%d"), spread([r["wall_s"] for r in finished], "%.0f")))
     out.append("")
