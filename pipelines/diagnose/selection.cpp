@@ -249,6 +249,21 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   }
 }
 
+namespace {
+
+// The tried candidate of lowest criterion among those whose criterion falls and whose fit lowers the
+// error without spoiling the held-out data; null when none does.
+const EffectCandidate* unexplained_lead(const Diagnosis& d, const DiagnoseOptions& options) {
+  const EffectCandidate* best = nullptr;
+  for (const auto& c : d.candidates) {
+    if (!c.tried || !(c.score < 0) || !(c.error < d.error_before) || check_held_out(c, d, options).spoils) continue;
+    if (best == nullptr || c.score < best->score) best = &c;
+  }
+  return best;
+}
+
+}  // namespace
+
 std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const DiagnoseOptions& options) {
   const double floor = floor_of(d, options);
   const double explained = options.noise_level_ratio * floor;
@@ -268,6 +283,15 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const 
     const bool passes = c.score < -options.evidence && !check_held_out(c, d, options).spoils;
     if (c.verdict == CandidateVerdict::tied || (unexplained_base && passes)) names.push_back(c.effect);
   }
+  // no contender and nothing accepted on an unexplained residual: the lead, the fit a tentative
+  // effect would start from, once, before any other search has gone on
+  const bool none_accepted = std::none_of(d.candidates.begin(), d.candidates.end(),
+                                          [](const EffectCandidate& c) { return c.verdict == CandidateVerdict::accepted; });
+  const bool none_continued = std::none_of(d.candidates.begin(), d.candidates.end(),
+                                           [](const EffectCandidate& c) { return c.continued.simulations > 0; });
+  if (names.empty() && unexplained_base && none_accepted && none_continued)
+    if (const EffectCandidate* lead = unexplained_lead(d, options); lead != nullptr && open(*lead))
+      names.push_back(lead->effect);
   return names;
 }
 
@@ -275,11 +299,7 @@ std::string tentative_effect(const Diagnosis& d, const DiagnoseOptions& options)
   if (!options.tentative_effect || !options.removal_check || options.max_effects == 1 ||
       d.outcome != DiagnosisOutcome::unexplained)
     return "";
-  const EffectCandidate* best = nullptr;
-  for (const auto& c : d.candidates) {
-    if (!c.tried || !(c.score < 0) || !(c.error < d.error_before) || check_held_out(c, d, options).spoils) continue;
-    if (best == nullptr || c.score < best->score) best = &c;
-  }
+  const EffectCandidate* best = unexplained_lead(d, options);
   return best == nullptr ? "" : best->effect;
 }
 

@@ -769,6 +769,24 @@ TEST(Evidence, AnUnexplainedResidualSearchesItsContendersFurther) {
   ASSERT_NE(d.verdict.find("No effect found"), std::string::npos) << d.verdict;
   EXPECT_EQ(candidates_to_search_further(d, options), std::vector<std::string>{"joint-closure"});
 
+  // no contender on an unexplained residual: the lead (the lowest criterion among the fits that
+  // lower the error, the tentative effect's) is searched further, once, and no other after it
+  // (A-closure-1 on all:-1, docs/journal/diagnose-studies.md: joint closure 271 -> 150 N at -8.0)
+  d.error_before = 271;
+  d.candidates = {tried_candidate("joint-gap", 258, 3.9), tried_candidate("support-compliance", 276, 7.6),
+                  tried_candidate("joint-closure", 150, -8.0), tried_candidate("cohesion", 265, -1.0)};
+  select_effect(d, options);
+  ASSERT_NE(d.verdict.find("No effect found"), std::string::npos) << d.verdict;
+  EXPECT_EQ(candidates_to_search_further(d, options), std::vector<std::string>{"joint-closure"});
+  EXPECT_EQ(tentative_effect(d, options), "joint-closure");
+  d.candidates[2].continued.simulations = 80;
+  EXPECT_TRUE(candidates_to_search_further(d, options).empty());  // nor cohesion, the lead after it
+  d.candidates[2].continued.simulations = 0;
+  d.candidates[2].error = 280;  // its error above the base's: no lead, none searched
+  d.candidates[3].score = 2;
+  select_effect(d, options);
+  EXPECT_TRUE(candidates_to_search_further(d, options).empty());
+
   // tied effects, and one rejected only because its error rose, each get a further search
   d.error_before = 316;
   d.candidates = {tried_candidate("cohesion", 211, -13.2), tried_candidate("joint-gap", 176, -15.2),

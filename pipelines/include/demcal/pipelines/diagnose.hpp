@@ -642,6 +642,11 @@ bool settle_on_frequency(Diagnosis& diagnosis, const DiagnoseOptions& options);
 //   fall, or as clearly less good than an accepted fit that itself stayed above the level after
 //   its own further search). Each gets the same further budget, so that no effect wins by search
 //   effort: the truth of an effect can be a valley its first search missed (docs/diagnose.md).
+// - Where there is no such contender, nothing is accepted and the base fit misses by more than
+//   kUnexplainedRatio x the floor ("no effect found"): the lead, the candidate tentative_effect
+//   would add (lowest criterion among those whose criterion falls and whose error is below the
+//   base's), once per step, before any other further search. Its fit is the evidence the verdict
+//   and the tentative step rest on.
 // A candidate already searched further (continued.simulations > 0) is not named again.
 std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis, const DiagnoseOptions& options);
 
