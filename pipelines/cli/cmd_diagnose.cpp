@@ -84,6 +84,11 @@ void setup(CLI::App& app) {
                   "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter, "
                   "then, while no fit explains the curves, for each contender (-1 = a candidate's budget, 0 = none)")
       ->capture_default_str();
+  sub->add_option("--union-rounds", o.union_rounds,
+                  "Rounds of the union search after the candidates' calibrations: one emulator of the curves over "
+                  "the base and every candidate's parameters, each round simulating its best point for each "
+                  "candidate (0 = none)")
+      ->capture_default_str();
   sub->add_option("--candidate-starts", o.candidate_starts,
                   "Points of each candidate's search design that start from a base fit: the best, then the best "
                   "base sets of other regions")

@@ -46,6 +46,9 @@ void DiagnoseOptions::Validate() const {
   budget("--profile-simulations", profile_simulations, 0);
   budget("--continued-simulations", continued_simulations, -1, " (-1: a candidate's budget)");
   budget("--scatter-runs", scatter_runs, 0);
+  at_least("--union-rounds", union_rounds, 0, " (0: none)");
+  if (auto m = limits::check(limits::Limit::evaluations, static_cast<double>(union_rounds)))
+    fail("--union-rounds", std::to_string(union_rounds), *m);
   at_least("--max-effects", max_effects, 0, " (0: no limit)");
   at_least("--resamples", resamples, 0);
   if (resamples > kMaxResamples) fail("--resamples", std::to_string(resamples), "must be <= " + std::to_string(kMaxResamples));
@@ -154,6 +157,7 @@ void detail::diagnose_from_base(DiagnosisRun& run) {
   if (!run.at_noise) {
     probe_signatures(run);
     calibrate_candidates(run);
+    if (run.options.union_rounds > 0) search_union(run);
   }
   select_and_search_further(run);
   resample_verdict(run);
@@ -200,6 +204,11 @@ json ContinuedSearch::to_json() const {
           {"error_found", finite_or_null(error_found)}, {"kept", kept}};
 }
 
+json UnionSearch::to_json() const {
+  return {{"rounds", rounds}, {"simulations", simulations}, {"training_rows", training_rows},
+          {"error_before", finite_or_null(error_before)}, {"error_found", finite_or_null(error_found)}, {"kept", kept}};
+}
+
 json Diagnosis::to_json() const {
   json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)},
                {"rerun_errors", base_rerun_errors}};
@@ -233,6 +242,7 @@ json Diagnosis::to_json() const {
     for (const auto& [name, range] : c.search_ranges) ranges[name] = {range[0], range[1]};
     cands.back()["search_ranges"] = ranges;
     if (c.continued.simulations > 0) cands.back()["continued"] = c.continued.to_json();
+    if (c.union_search.rounds > 0) cands.back()["union_search"] = c.union_search.to_json();
     if (!c.other_targets.empty()) {
       json others = json::array();
       for (const auto& o : c.other_targets)

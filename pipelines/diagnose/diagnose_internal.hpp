@@ -3,6 +3,7 @@
 //   base_residual.cpp  2. the base best set's residual, noise and simulation scatter
 //   signatures.cpp     3. each effect probed: how much of the residual it can explain
 //   extension.cpp      4. the extended calibrations, best signature first
+//   union_search.cpp   4b. the union search: one emulator over the base and every candidate
 //   selection.cpp      5. the verdict, with further searches where no fit explains the curves
 //   resampling.cpp     5c. how often the verdict holds over resamples of the data and round-off
 //   ranges.cpp         6. how tightly the data pin an accepted effect's parameters
@@ -110,6 +111,8 @@ class CaseRunner {
   // Tasks at once per worker, at most: each task's rounds already use every worker, so more would
   // only add threads.
   static constexpr int kTasksPerWorker = 4;
+  // Model seconds spent outside the calibrations (the union search's emulator).
+  void add_model_seconds(double seconds) { add_times(0, seconds); }
   // This session's seconds waiting for simulations (direct runs and the calibrations') and in the
   // calibrations' models (surrogate fits and search).
   double simulation_seconds() const { return simulation_s_; }
@@ -206,6 +209,11 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
                          CaseRunner& runner, const std::vector<std::map<std::string, double>>& further_base = {},
                          std::vector<ParameterSet>* searched = nullptr);
 
+// A fit's fields of `c` (rerun_errors, residuals, error, rms, held-out errors) from a set's run and
+// re-runs (runs_with_reruns), judged on the run of median error; false, with `c.reason`, when the
+// first run failed.
+bool judge_fit(EffectCandidate& c, const std::vector<Evaluation>& runs);
+
 // Whether a signature share comes within `share` of a positive reference share: a signature is a
 // linearisation from a few single runs, so shares that close do not order two targets or effects.
 bool signature_comes_close(double score, double reference, double share);
@@ -247,6 +255,9 @@ struct DiagnosisRun {
   Diagnosis d;
   std::vector<const dem::Effect*> effects;  // the effects considered (DiagnoseOptions::effects)
   long per_candidate = 0;                   // simulations per candidate calibration
+  // The archives of the steps before this one (step 8; the first step's first): their calibrations
+  // ran this step's base model, whose runs the union search learns from.
+  std::vector<std::string> earlier_archives;
 
   // 2. the base residual
   std::map<std::string, double> base_params;  // the base best set, every parameter
@@ -274,6 +285,13 @@ void fit_base(DiagnosisRun& run);                      // 1. base_fit.cpp
 void measure_base_residual(DiagnosisRun& run);         // 2. base_residual.cpp
 void probe_signatures(DiagnosisRun& run);              // 3. signatures.cpp
 void calibrate_candidates(DiagnosisRun& run);          // 4. extension.cpp
+// 4b. The union search (DiagnoseOptions::union_rounds; union_search.cpp): one emulator of
+// the curves over UnionLayout's space of the base and every calibrated candidate's model, trained
+// on every archived run of these models and on its own proposals; each round searches it for each
+// candidate from many starts and simulates the best point of each, one per worker. A candidate's
+// best proposal, judged on the median of its re-runs, replaces the calibration's fit when its error
+// is lower (EffectCandidate::union_search).
+void search_union(DiagnosisRun& run);
 void select_and_search_further(DiagnosisRun& run);     // 5. selection.cpp
 void resample_verdict(DiagnosisRun& run);              // 5c. resampling.cpp
 void bound_accepted_parameters(DiagnosisRun& run);     // 6. ranges.cpp

@@ -189,6 +189,7 @@ void write_best_sets(std::ostream& md, const Diagnosis& d, const DiagnoseOptions
       md.seekp(-1, std::ios_base::cur);
       md << ".\n\n";
     }
+    if (c.union_search.rounds > 0) md << c.union_search.describe(c.effect) << "\n\n";
     if (c.continued.simulations > 0) md << c.continued.describe(c.effect) << "\n\n";
     if (c.bounds.empty()) continue;
     md << "How tightly the data pin the effect's parameters: each moved from the best set, the other free "

@@ -231,6 +231,12 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
   c.fitness = r.best.fitness;
   best_set = complete_parameters(ext, r.best.params);
   const std::vector<Evaluation> runs = runs_with_reruns(m.config, ext, best_set, &base_residuals, options.scatter_runs, runner);
+  if (!judge_fit(c, runs)) return false;
+  c.effect_parameters = static_cast<int>(m.parameter_names.size());
+  return true;
+}
+
+bool judge_fit(EffectCandidate& c, const std::vector<Evaluation>& runs) {
   if (!runs.front().ok) {
     c.reason = "its best set cannot be re-simulated: " + runs.front().message;
     return false;
@@ -252,7 +258,6 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
   c.held_out_rms.clear();
   for (const auto& ch : e.held_out) c.held_out_rms[key_of(ch)] = ch.rms;
   c.held_out_error = e.held_out_error;
-  c.effect_parameters = static_cast<int>(m.parameter_names.size());
   return true;
 }
 

@@ -47,6 +47,8 @@ std::unique_ptr<DiagnosisRun> next_step(const DiagnosisRun& run, const EffectCan
   fs::create_directories(folder);
   auto next = std::make_unique<DiagnosisRun>(config, options);
   next->per_candidate = run.per_candidate;
+  next->earlier_archives = run.earlier_archives;
+  next->earlier_archives.push_back(diagnosis_archive(run.options));
   next->d.base_params = c.params;
   next->d.base_fitness = c.fitness;
   next->base_params = best;

@@ -169,6 +169,15 @@ std::string ContinuedSearch::describe(const std::string& effect) const {
          " N); the first fit stands.";
 }
 
+std::string UnionSearch::describe(const std::string& effect) const {
+  const std::string head = "The union search proposed " + std::to_string(rounds) + " points for " + effect +
+                           " from an emulator of " + std::to_string(training_rows) + " runs of every model";
+  if (kept) return head + "; the best lowered its error from " + format_number(error_before, 3) + " to " + format_number(error_found, 3) + " N.";
+  if (!std::isfinite(error_found)) return head + "; none fitted better than its calibration, whose fit stands.";
+  return head + "; the best, re-run, fitted to " + format_number(error_found, 3) + " N against " + format_number(error_before, 3) +
+         " N, so the calibration's fit stands.";
+}
+
 namespace {
 
 // A value in the unit a structural engineer reads: millimetres for "m", degrees for "deg", and a

@@ -979,6 +979,63 @@ TEST(Evidence, FurtherStartsAreTheBestBaseSetsOfOtherRegions) {
   EXPECT_EQ(further_start_sets(best, runs, space, 5, 0.01).size(), 4u);  // every finite complete set but the best
 }
 
+// The union search's space: the base parameters, then per model a switch and its own parameters. A
+// base run switches every model off, a model's run switches it alone on, and a model switched off
+// sits at the middle of its box, so that two runs of the base with different values of nothing
+// are one point.
+TEST(Evidence, TheUnionSpaceHoldsEveryModelWithTheOthersSwitchedOff) {
+  optimise::ParameterSpace base;
+  base.add("kn", 1e8, 1e10, optimise::ParameterSpec::Scale::log10).add("friction_deg", 25, 45);
+  optimise::ParameterSpace support = base;
+  support.add("support_kx", 1e5, 1e8, optimise::ParameterSpec::Scale::log10);
+  optimise::ParameterSpace closure;  // a model whose box of a base parameter is narrower
+  closure.add("kn", 1e9, 1e10, optimise::ParameterSpec::Scale::log10).add("friction_deg", 25, 45);
+  closure.add("closure_max", 1e-5, 1e-3, optimise::ParameterSpec::Scale::log10).add("closure_exponent", 1, 3);
+  UnionLayout layout(base);
+  EXPECT_EQ(layout.add_model(support), 0);
+  EXPECT_EQ(layout.add_model(closure), 1);
+  ASSERT_EQ(layout.models(), 2);
+  ASSERT_EQ(layout.dimension(), 2 + 2 + 3);  // base, [switch, kx], [switch, max, exponent]
+
+  const Eigen::VectorXd b = layout.point(-1, {{"kn", 1e9}, {"friction_deg", 35}, {"support_kx", 1e6}});
+  ASSERT_EQ(b.size(), 7);
+  EXPECT_NEAR(b(0), 0.5, 1e-12);
+  EXPECT_NEAR(b(1), 0.5, 1e-12);
+  EXPECT_EQ(b(2), 0);    // support off
+  EXPECT_EQ(b(3), 0.5);  // its kx at the middle, whatever the set says
+  EXPECT_EQ(b(4), 0);    // closure off
+  const Eigen::VectorXd s = layout.point(0, {{"kn", 1e9}, {"friction_deg", 35}, {"support_kx", 1e6}});
+  EXPECT_EQ(s(2), 1);
+  EXPECT_NEAR(s(3), 1.0 / 3, 1e-12);
+  EXPECT_EQ(s(4), 0);
+  EXPECT_EQ(s.tail(2), Eigen::Vector2d(0.5, 0.5));
+  EXPECT_EQ(layout.point(0, {{"kn", 1e9}, {"friction_deg", 35}}).size(), 0);  // kx missing
+  EXPECT_EQ(layout.point(1, {{"kn", 1e9}, {"friction_deg", std::nan("")}, {"closure_max", 1e-4}, {"closure_exponent", 2}}).size(), 0);
+
+  // switched: the same base values, another model on
+  const Eigen::VectorXd c = layout.switched(1, s);
+  EXPECT_EQ(c.head(2), s.head(2));
+  EXPECT_EQ(c(2), 0);
+  EXPECT_EQ(c(3), 0.5);
+  EXPECT_EQ(c(4), 1);
+  EXPECT_EQ(layout.coordinates(1), (std::vector<Eigen::Index>{0, 1, 5, 6}));
+  EXPECT_EQ(layout.coordinates(-1), (std::vector<Eigen::Index>{0, 1}));
+
+  // back to a model's parameters: physical, within that model's own box
+  Eigen::VectorXd x = c;
+  x(0) = 0;  // kn 1e8, below the closure model's box
+  x(5) = 0.5;
+  x(6) = 1;
+  const auto p = layout.parameters(1, x);
+  ASSERT_EQ(p.size(), 4u);
+  EXPECT_DOUBLE_EQ(p.at("kn"), 1e9);
+  EXPECT_NEAR(p.at("closure_max"), 1e-4, 1e-16);
+  EXPECT_DOUBLE_EQ(p.at("closure_exponent"), 3);
+  EXPECT_EQ(layout.parameters(-1, x).size(), 2u);
+  const Eigen::VectorXd round_trip = layout.point(0, layout.parameters(0, s));
+  for (Eigen::Index k = 0; k < s.size(); ++k) EXPECT_NEAR(round_trip(k), s(k), 1e-12) << k;
+}
+
 // Where the base response splits, step 4 does not prune by signature: on the goal study's
 // joint-closure seed 2 (docs/journal/diagnose-studies.md) joint closure ranked fifth of seven (12 %) and was left
 // untried, while its calibration alone fits the measurement to the noise (235 -> 62 N).
@@ -1151,6 +1208,9 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   o.continued_simulations = -2;
   expect_rejected(o, "--continued-simulations -2", "a further search's budget below -1");
   o.continued_simulations = -1;
+  o.union_rounds = -1;
+  expect_rejected(o, "--union-rounds -1", "a negative count of union rounds");
+  o.union_rounds = 0;
   o.close_target_share = 0;
   expect_rejected(o, "--close-target-share 0", "a share of the best target's signature of 0");
   o.close_target_share = 1.5;
@@ -1426,6 +1486,63 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
     EXPECT_TRUE(written.contains(key)) << key;
   for (const char* file : {"report.md", "archive.sqlite", "base/result.json"}) EXPECT_TRUE(fs::exists(dir / "out" / file)) << file;
   EXPECT_TRUE(fs::exists(dir / "out" / "candidates" / "support-compliance" / "result.json"));
+}
+
+// The union search on the small search: its rounds propose a point per candidate, each simulated
+// and counted, and a candidate keeps the proposal only where it fits better than its calibration.
+TEST(DiagnoseLoop, TheUnionSearchProposesAPointPerCandidateEachRound) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "union");
+  const json j = small_search_campaign(dir, "union");
+  const auto diagnose = [&](const std::string& name, int rounds) {
+    DiagnoseOptions o;
+    o.out = (dir / name).string();
+    o.effects = {"support-compliance", "friction-softening"};
+    o.candidates = 2;
+    o.candidate_simulations = 8;
+    o.profile_simulations = 2;
+    o.union_rounds = rounds;
+    o.progress = false;
+    return run_diagnosis(campaign_from_json(j, dir.string(), "union.json"), o);
+  };
+  const Diagnosis without = diagnose("without", 0);
+  const Diagnosis with = diagnose("with", 3);
+  ASSERT_EQ(with.status, CampaignStatus::completed) << with.message;
+  ASSERT_EQ(with.candidates.size(), without.candidates.size());
+  long union_runs = 0;
+  int searched = 0;
+  for (std::size_t i = 0; i < with.candidates.size(); ++i) {
+    const EffectCandidate& c = with.candidates[i];
+    const EffectCandidate& before = without.candidates[i];
+    EXPECT_EQ(before.union_search.rounds, 0);
+    if (!c.tried) continue;
+    ++searched;
+    const UnionSearch& u = c.union_search;
+    EXPECT_EQ(u.rounds, 3) << c.effect;
+    EXPECT_GE(u.simulations, 3) << c.effect;
+    EXPECT_GT(u.training_rows, 2 * 8) << c.effect;  // the base's runs and both calibrations' at least
+    // the fit before step 5's further search, if one ran: the calibration's (the same in both), or
+    // with the union search the proposal kept
+    const auto before_further = [](const EffectCandidate& e) {
+      return e.continued.simulations > 0 ? e.continued.error_before : e.error;
+    };
+    EXPECT_EQ(u.error_before, before_further(before)) << c.effect;
+    if (u.kept) {
+      EXPECT_LT(u.error_found, u.error_before) << c.effect;
+      EXPECT_EQ(before_further(c), u.error_found) << c.effect;
+    } else {
+      EXPECT_EQ(before_further(c), u.error_before) << c.effect;
+    }
+    EXPECT_EQ(c.simulations - c.continued.simulations, before.simulations - before.continued.simulations + u.simulations)
+        << c.effect;
+    union_runs += u.simulations;
+  }
+  EXPECT_EQ(searched, 2);
+  const json written = test_support::read_json(dir / "with" / "diagnosis.json");
+  int reported = 0;
+  for (const auto& c : written["candidates"])
+    if (c.contains("union_search")) ++reported;
+  EXPECT_EQ(reported, searched);
+  EXPECT_GT(union_runs, 0);
 }
 
 // Without a total budget the calibrations of a stage (the candidates and their close targets, the
@@ -1935,11 +2052,13 @@ TEST(DiagnoseLoop, AFitLeftAboveTheFloorIsSearchedFurther) {
                                {{"kn", 2.6e9}, {"ks", 0.9e9}});
   std::ofstream(dir / "campaign.json") << j.dump(2);
   // The parts count the runs each further search adds; the removal check, whose re-fit starts from
-  // whichever fit a part ends with, would add its own, so it is left out here.
+  // whichever fit a part ends with, would add its own, so it is left out here, and so is the union
+  // search, whose proposals would move the fits that the parts compare (it has its own test).
   const auto diagnose = [&](const std::string& options, const std::string& continued) {
     const std::string command = std::string(DEMCAL_BINARY) + " diagnose " + (dir / "campaign.json").string() +
                                 " --out " + (dir / "diag").string() +
-                                " --quiet --no-report --no-parameter-bounds --no-removal-check --candidate-simulations 24"
+                                " --quiet --no-report --no-parameter-bounds --no-removal-check --union-rounds 0"
+                                " --candidate-simulations 24"
                                 " --evidence 1 --resume " + options + " --continued-simulations " + continued +
                                 " > /dev/null 2>&1";
     EXPECT_EQ(std::system(command.c_str()), 0) << command;

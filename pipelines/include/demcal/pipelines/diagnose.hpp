@@ -323,6 +323,12 @@ struct DiagnoseOptions {
   // where the selection leaves the residual unexplained: the accepted effect, then, while no fit
   // explains the curves, the contenders. -1: a candidate's budget; 0: none.
   long continued_simulations = -1;
+  // --union-rounds: rounds of the union search after the candidates' calibrations (UnionSearch;
+  // docs/diagnose.md, step 4): one emulator of the curves over the base parameters and every
+  // calibrated candidate's, each candidate's model switched on or off, trained on every run of the
+  // diagnosis; each round searches it for every candidate from many starts and simulates the best
+  // point of each (measured: docs/diagnose.md, step 4b). 0: none.
+  int union_rounds = 6;
   // --max-effects: effects added at most. After an effect is accepted the diagnosis starts again
   // from the model with it (its fit the new base, the other effects the candidates), until no
   // further effect passes; 0 = no limit, 1 = one effect per diagnosis.
@@ -351,6 +357,21 @@ struct ContinuedSearch {
   double error_found = kNaN;   // the further search's fit, on the median of its re-runs, N (NaN: it failed)
   bool kept = false;           // that fit replaced the first (a lower error)
   std::string describe(const std::string& effect) const;  // a sentence for the verdict
+  nlohmann::json to_json() const;
+};
+
+// The union search of a candidate (DiagnoseOptions::union_rounds): the points its rounds proposed
+// for the candidate's model, simulated, and the best of them judged as a calibration's fit is.
+struct UnionSearch {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  int rounds = 0;              // rounds that proposed a point for this candidate (0: none ran)
+  long simulations = 0;        // its proposals and the best one's re-runs
+  long training_rows = 0;      // runs the emulator of its last round was trained on, every model's
+  double error_before = kNaN;  // the candidate's fit before, N
+  double error_found = kNaN;   // the best proposal, on the median of its re-runs, N (NaN: none ran)
+  bool kept = false;           // that fit replaced the calibration's (a lower error)
+  std::string describe(const std::string& effect) const;  // a sentence for the report
   nlohmann::json to_json() const;
 };
 
@@ -410,6 +431,7 @@ struct EffectCandidate {
   double held_out_error = kNaN;            // RMS force error over the held-out channels, N
   std::vector<ParameterBound> bounds;      // of the effect's parameters, when accepted or tied
   ContinuedSearch continued;               // when searched further (candidates_to_search_further); the fit above is the kept one
+  UnionSearch union_search;                // DiagnoseOptions::union_rounds; the fit above is the kept one
   // effect parameter -> {lowest, highest} value searched: the registry's range, or for a
   // structure-relative one (dem::SearchScale) that of this structure; the calibration's box when
   // the effect was calibrated (a residual friction below the lowest friction searched), else the
@@ -566,6 +588,44 @@ std::vector<std::map<std::string, double>> further_start_sets(const std::map<std
                                                               const std::vector<ParameterSet>& runs,
                                                               const optimise::ParameterSpace& space, int count,
                                                               double separation);
+
+// The space of the union search (DiagnoseOptions::union_rounds): the base parameters (unit values in
+// the campaign's bounds), then for each model of a candidate (an effect at its target) a switch and
+// that model's own parameters (unit values in the box its calibration searched). A run of the base
+// model is the point with every switch at 0; a run of model m has m's switch at 1 and its own
+// parameters at their unit values. A model switched off has its parameters at the middle of its
+// box: "off" is one point of its block, so that one emulator of the curves over this space learns
+// from every model's runs how the base parameters act, and each model's search starts from what
+// the others found, the base fit's compensation included or not.
+class UnionLayout {
+ public:
+  explicit UnionLayout(optimise::ParameterSpace base);
+  // Adds the model whose calibration searched `space` (the base parameters and its own, which no
+  // model added before may share); returns its index.
+  int add_model(const optimise::ParameterSpace& space);
+  int models() const { return static_cast<int>(blocks_.size()); }
+  Eigen::Index dimension() const { return dimension_; }
+  // The union point of a set of model `model` (-1: the base model): empty when a free parameter of
+  // that model is missing or not finite. Values outside a box are clipped to it.
+  Eigen::VectorXd point(int model, const std::map<std::string, double>& params) const;
+  // `x` with model `model` switched on (-1: none) and every other off.
+  Eigen::VectorXd switched(int model, Eigen::VectorXd x) const;
+  // The coordinates of `model`'s own search: the base parameters' and its own (not its switch).
+  std::vector<Eigen::Index> coordinates(int model) const;
+  // The free parameters of model `model` (-1: the base) at union point `x`, physical, within the
+  // box of that model's own space.
+  std::map<std::string, double> parameters(int model, const Eigen::VectorXd& x) const;
+
+ private:
+  struct Block {
+    optimise::ParameterSpace space;   // the model's calibration space
+    std::vector<std::string> own;     // its parameters the base lacks
+    Eigen::Index offset = 0;          // its switch; its own parameters follow
+  };
+  optimise::ParameterSpace base_;
+  std::vector<Block> blocks_;
+  Eigen::Index dimension_ = 0;
+};
 
 // A sentence for the verdict when the base fit's re-runs scatter by more than
 // options.scatter_floor_ratio x the noise: the fit sits where the model's response splits, the

@@ -1,0 +1,443 @@
+// Stage 4b of the diagnosis, the union search (DiagnoseOptions::union_rounds): one emulator of the
+// curves over the base parameters and every calibrated candidate's (UnionLayout), trained on every
+// archived run of those models, searched for each candidate from many starts; the best point of
+// each simulated per round, and the best of a candidate's proposals kept where it fits better than
+// its calibration did.
+#include "diagnose_internal.hpp"
+
+#include "demcal/pipelines/backend.hpp"
+#include "demcal/pipelines/surrogate_data.hpp"
+#include "demcal/surrogate/curve_ensemble.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <filesystem>
+#include <random>
+#include <set>
+
+namespace demcal::pipelines {
+
+namespace fs = std::filesystem;
+using namespace detail;
+
+UnionLayout::UnionLayout(optimise::ParameterSpace base) : base_(std::move(base)), dimension_(base_.dimension()) {}
+
+int UnionLayout::add_model(const optimise::ParameterSpace& space) {
+  Block b;
+  b.space = space;
+  const auto base_names = base_.free_names();
+  for (const auto& name : space.free_names()) {
+    if (std::find(base_names.begin(), base_names.end(), name) != base_names.end()) continue;
+    b.own.push_back(name);
+  }
+  b.offset = dimension_;
+  dimension_ += 1 + static_cast<Eigen::Index>(b.own.size());
+  blocks_.push_back(std::move(b));
+  return models() - 1;
+}
+
+namespace {
+
+// The unit value of `value` for `spec`, clipped to [0, 1]; NaN when it is not finite.
+double unit_of(const optimise::ParameterSpec& spec, double value) {
+  if (!std::isfinite(value)) return std::numeric_limits<double>::quiet_NaN();
+  optimise::ParameterSpace one;
+  one.add(spec);
+  return std::clamp(one.to_unit(Eigen::VectorXd::Constant(1, value))(0), 0.0, 1.0);
+}
+
+double physical_of(const optimise::ParameterSpec& spec, double unit) {
+  optimise::ParameterSpace one;
+  one.add(spec);
+  return one.to_physical(Eigen::VectorXd::Constant(1, std::clamp(unit, 0.0, 1.0)))(0);
+}
+
+const optimise::ParameterSpec& spec_of(const optimise::ParameterSpace& space, const std::string& name) {
+  for (const auto& p : space.free_parameters())
+    if (p.name == name) return p;
+  throw std::invalid_argument("union search: " + name + " is not a free parameter of the model");
+}
+
+}  // namespace
+
+Eigen::VectorXd UnionLayout::point(int model, const std::map<std::string, double>& params) const {
+  Eigen::VectorXd x = switched(-1, Eigen::VectorXd::Constant(dimension_, 0.5));
+  const auto value = [&](const std::string& name) {
+    const auto it = params.find(name);
+    return it == params.end() ? std::numeric_limits<double>::quiet_NaN() : it->second;
+  };
+  const auto& base = base_.free_parameters();
+  for (std::size_t k = 0; k < base.size(); ++k) {
+    x(static_cast<Eigen::Index>(k)) = unit_of(base[k], value(base[k].name));
+    if (std::isnan(x(static_cast<Eigen::Index>(k)))) return {};
+  }
+  if (model < 0) return x;
+  const Block& b = blocks_.at(static_cast<std::size_t>(model));
+  x(b.offset) = 1;
+  for (std::size_t k = 0; k < b.own.size(); ++k) {
+    const Eigen::Index at = b.offset + 1 + static_cast<Eigen::Index>(k);
+    x(at) = unit_of(spec_of(b.space, b.own[k]), value(b.own[k]));
+    if (std::isnan(x(at))) return {};
+  }
+  return x;
+}
+
+Eigen::VectorXd UnionLayout::switched(int model, Eigen::VectorXd x) const {
+  for (int m = 0; m < models(); ++m) {
+    const Block& b = blocks_[static_cast<std::size_t>(m)];
+    x(b.offset) = m == model ? 1.0 : 0.0;
+    if (m != model) x.segment(b.offset + 1, static_cast<Eigen::Index>(b.own.size())).setConstant(0.5);
+  }
+  return x;
+}
+
+std::vector<Eigen::Index> UnionLayout::coordinates(int model) const {
+  std::vector<Eigen::Index> c;
+  for (Eigen::Index k = 0; k < base_.dimension(); ++k) c.push_back(k);
+  if (model < 0) return c;
+  const Block& b = blocks_.at(static_cast<std::size_t>(model));
+  for (std::size_t k = 0; k < b.own.size(); ++k) c.push_back(b.offset + 1 + static_cast<Eigen::Index>(k));
+  return c;
+}
+
+std::map<std::string, double> UnionLayout::parameters(int model, const Eigen::VectorXd& x) const {
+  std::map<std::string, double> params;
+  const optimise::ParameterSpace& own_space = model < 0 ? base_ : blocks_.at(static_cast<std::size_t>(model)).space;
+  const auto& base = base_.free_parameters();
+  for (std::size_t k = 0; k < base.size(); ++k) {
+    const optimise::ParameterSpec& box = spec_of(own_space, base[k].name);  // a model's box may be narrower
+    params[base[k].name] = std::clamp(physical_of(base[k], x(static_cast<Eigen::Index>(k))), box.lower, box.upper);
+  }
+  if (model < 0) return params;
+  const Block& b = blocks_.at(static_cast<std::size_t>(model));
+  for (std::size_t k = 0; k < b.own.size(); ++k)
+    params[b.own[k]] = physical_of(spec_of(b.space, b.own[k]), x(b.offset + 1 + static_cast<Eigen::Index>(k)));
+  return params;
+}
+
+namespace detail {
+
+namespace {
+
+// Emulator searches: random points scored, the best few refined by a compass search on the
+// ensemble's mean predicted fitness.
+constexpr int kRandomPoints = 256;
+constexpr int kLocalStarts = 6;
+constexpr double kFirstStep = 0.125, kLastStep = 1.0 / 512;
+// A proposal closer than this (unit-cube distance over the model's coordinates) to a run of the
+// model is not simulated again: the next best is taken.
+constexpr double kSeparation = 1e-3;
+
+// A model of the union: its calibration space and cases (the archive's keys), and the model whose
+// config simulates it (every case, the held-out ones included).
+struct UnionModel {
+  int index = -1;                           // UnionLayout's (-1: the base)
+  EffectCandidate* candidate = nullptr;     // null for the base
+  const ExtendedModel* extended = nullptr;  // null for the base
+  CampaignConfig fitted;                    // the calibration's campaign: fitted cases, its space
+  std::vector<ArchivedCase> cases;
+};
+
+struct Row {
+  Eigen::VectorXd x;
+  Eigen::VectorXd outputs;
+  double fitness = 0;  // curve_fitness of the outputs: what the emulator's predictions are compared with
+  int model = -1;
+};
+
+std::vector<ArchivedCase> archived_cases(const CampaignConfig& fitted, const std::vector<CaseCurveGrid>& grids) {
+  std::vector<dem::Scene> scenes;
+  for (std::size_t k = 0; k < fitted.cases.size(); ++k)
+    scenes.push_back(build_scene(fitted.cases[k].scene, fitted.source + ": cases[" + std::to_string(k) + "].scene"));
+  const ThreadBackend hashes(std::move(scenes), 1);
+  std::vector<ArchivedCase> cases;
+  for (std::size_t k = 0; k < fitted.cases.size(); ++k)
+    cases.push_back({hashes.model_hash(k), grids[k].objective_key, fitted.cases[k].weight, grids[k].grid});
+  return cases;
+}
+
+class Emulator {
+ public:
+  Emulator(std::vector<std::shared_ptr<const CurveGrid>> grids, surrogate::MlpOptions options)
+      : grids_(std::move(grids)), options_(std::move(options)) {}
+
+  // A full fit on `rows` the first time, then a continued one from the last weights.
+  bool train(const std::vector<Row>& rows) {
+    if (rows.empty()) return false;
+    Eigen::MatrixXd X(static_cast<Eigen::Index>(rows.size()), rows.front().x.size());
+    Eigen::MatrixXd Y(static_cast<Eigen::Index>(rows.size()), rows.front().outputs.size());
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      X.row(static_cast<Eigen::Index>(i)) = rows[i].x.transpose();
+      Y.row(static_cast<Eigen::Index>(i)) = rows[i].outputs.transpose();
+    }
+    return ensemble_.fitted() ? ensemble_.refine(X, Y, options_) : ensemble_.fit(X, Y, options_);
+  }
+
+  // The members' mean fitness of their predicted curves at `x`.
+  double fitness(const Eigen::VectorXd& x) const {
+    double sum = 0;
+    for (int m = 0; m < ensemble_.members(); ++m) sum += curve_fitness(ensemble_.predict(m, x), grids_);
+    const double mean = sum / ensemble_.members();
+    return std::isfinite(mean) ? mean : std::numeric_limits<double>::infinity();
+  }
+
+ private:
+  std::vector<std::shared_ptr<const CurveGrid>> grids_;
+  surrogate::MlpOptions options_;
+  surrogate::CurveEnsemble ensemble_;
+};
+
+// A compass search of `x` along `coordinates` on the emulator: each coordinate moved by ± step, the
+// best move taken, the step halved when none improves; `value` is x's prediction, updated.
+void compass_search(const Emulator& emulator, const std::vector<Eigen::Index>& coordinates, Eigen::VectorXd& x,
+                    double& value) {
+  for (double step = kFirstStep; step >= kLastStep;) {
+    Eigen::VectorXd best = x;
+    double best_value = value;
+    for (const Eigen::Index k : coordinates)
+      for (const double sign : {-1.0, 1.0}) {
+        Eigen::VectorXd trial = x;
+        trial(k) = std::clamp(trial(k) + sign * step, 0.0, 1.0);
+        if (trial(k) == x(k)) continue;
+        const double v = emulator.fitness(trial);
+        if (v < best_value) {
+          best_value = v;
+          best = trial;
+        }
+      }
+    if (best_value < value) {
+      x = best;
+      value = best_value;
+    } else {
+      step /= 2;
+    }
+  }
+}
+
+// Where the emulator puts model `model`'s best point: random points over its coordinates and
+// `starts` scored, the best kLocalStarts refined; the best refined point at least kSeparation from
+// every point of `taken` (its runs and proposals so far). Empty when every refined point is taken.
+Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, int model,
+                        const std::vector<Eigen::VectorXd>& starts, const std::vector<Eigen::VectorXd>& taken,
+                        std::mt19937_64& rng, double& predicted) {
+  const std::vector<Eigen::Index> coordinates = layout.coordinates(model);
+  std::vector<std::pair<double, Eigen::VectorXd>> scored;
+  for (const auto& s : starts) {
+    const Eigen::VectorXd x = layout.switched(model, s);
+    scored.emplace_back(emulator.fitness(x), x);
+  }
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int i = 0; i < kRandomPoints; ++i) {
+    Eigen::VectorXd x = layout.switched(model, starts.front());
+    for (const Eigen::Index k : coordinates) x(k) = unit(rng);
+    scored.emplace_back(emulator.fitness(x), x);
+  }
+  std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  scored.resize(std::min<std::size_t>(scored.size(), kLocalStarts));
+  for (auto& [value, x] : scored) compass_search(emulator, coordinates, x, value);
+  std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  const auto distance = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+    double sum = 0;
+    for (const Eigen::Index k : coordinates) sum += (a(k) - b(k)) * (a(k) - b(k));
+    return std::sqrt(sum);
+  };
+  for (const auto& [value, x] : scored) {
+    if (std::any_of(taken.begin(), taken.end(), [&, &x = x](const Eigen::VectorXd& t) { return distance(x, t) < kSeparation; }))
+      continue;
+    predicted = value;
+    return x;
+  }
+  return {};
+}
+
+// The outputs of a run's fitted cases (`fitted`'s names, in order) on their grids; empty when a
+// case failed or has no curve on a channel.
+Eigen::VectorXd run_outputs(const Evaluation& e, const CampaignConfig& fitted, const std::vector<ArchivedCase>& cases) {
+  std::vector<Eigen::VectorXd> parts;
+  Eigen::Index size = 0;
+  for (std::size_t k = 0; k < fitted.cases.size(); ++k) {
+    const auto it = std::find_if(e.cases.begin(), e.cases.end(), [&](const CasePrediction& p) { return p.name == fitted.cases[k].name; });
+    if (it == e.cases.end() || it->status == "failed") return {};
+    parts.push_back(curve_outputs(it->simulated, *cases[k].grid));
+    if (parts.back().size() == 0) return {};
+    size += parts.back().size();
+  }
+  Eigen::VectorXd outputs(size);
+  Eigen::Index at = 0;
+  for (const auto& p : parts) {
+    outputs.segment(at, p.size()) = p;
+    at += p.size();
+  }
+  return outputs;
+}
+
+}  // namespace
+
+void search_union(DiagnosisRun& run) {
+  const DiagnoseOptions& options = run.options;
+  double model_s = 0;  // the emulator's fits and searches
+  const auto model_time = [&](auto&& work) {
+    const auto start = std::chrono::steady_clock::now();
+    work();
+    model_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+
+  const CampaignConfig base_fitted = fitted_cases(run.config, options);
+  const std::vector<CaseCurveGrid> grids = campaign_curve_grids(base_fitted);
+  std::vector<std::shared_ptr<const CurveGrid>> grid_pointers;
+  for (const auto& g : grids) grid_pointers.push_back(g.grid);
+
+  UnionLayout layout(run.config.space);
+  std::vector<UnionModel> models(1);  // the base first
+  models.front().fitted = base_fitted;
+  models.front().cases = archived_cases(base_fitted, grids);
+  for (auto& c : run.d.candidates) {
+    if (!c.tried || !std::isfinite(c.error) || !run.models.count(c.effect)) continue;
+    UnionModel m;
+    m.candidate = &c;
+    m.extended = &run.models.at(c.effect);
+    m.fitted = fitted_cases(m.extended->config, options);
+    m.fitted.space = extended_space(*m.extended, run.config, run.d.base_params, options);
+    m.cases = archived_cases(m.fitted, grids);
+    m.index = layout.add_model(m.fitted.space);
+    models.push_back(std::move(m));
+  }
+  if (models.size() < 2) return;
+
+  // Every archived run of the models, on the grids of this step's objective: a further step's base
+  // model ran in the steps before it, whose archives come first.
+  std::vector<Row> rows;
+  std::set<std::pair<int, std::vector<double>>> seen;
+  std::vector<std::string> archives = run.earlier_archives;
+  archives.push_back(diagnosis_archive(options));
+  for (const auto& path : archives) {
+    if (!fs::exists(path)) continue;
+    const RunArchive archive(path);
+    for (const auto& m : models)
+      for (const auto& r : archive_training_rows(archive, m.fitted.space, m.cases)) {
+        if (r.outputs.size() == 0 || !std::isfinite(r.fitness)) continue;
+        const Eigen::VectorXd x = layout.point(m.index, m.fitted.space.values(m.fitted.space.to_physical(r.unit)));
+        if (x.size() == 0 || !seen.insert({m.index, std::vector<double>(x.data(), x.data() + x.size())}).second) continue;
+        rows.push_back({x, r.outputs, curve_fitness(r.outputs, grid_pointers), m.index});
+      }
+  }
+  surrogate::MlpOptions mlp = run.config.surrogate.options.mlp;
+  mlp.seed = static_cast<std::uint64_t>(run.config.optimiser.seed);
+  Emulator emulator(grid_pointers, mlp);
+  std::mt19937_64 rng(static_cast<std::uint64_t>(run.config.optimiser.seed) * 0x9e3779b97f4a7c15ULL + 7);
+
+  struct Best {
+    double error = std::numeric_limits<double>::infinity();
+    std::map<std::string, double> set;  // complete
+  };
+  std::vector<Best> best(models.size());
+  std::vector<long> proposed(models.size(), 0);
+  std::vector<int> rounds(models.size(), 0);
+  for (int round = 1; round <= options.union_rounds; ++round) {
+    const long wanted = static_cast<long>(models.size() - 1) * static_cast<long>(models.front().cases.size());
+    if (run.within_budget(wanted) < wanted) break;
+    bool trained = false;
+    model_time([&] { trained = emulator.train(rows); });
+    if (!trained) break;
+    std::vector<RunRequest> requests;
+    std::vector<std::size_t> of_model;
+    std::vector<Eigen::VectorXd> points;
+    std::vector<std::map<std::string, double>> sets;
+    for (std::size_t i = 1; i < models.size(); ++i) {
+      const UnionModel& m = models[i];
+      // Starts: the model's own best runs, then the base's and every other model's, each with this
+      // model's parameters at its calibration's best: what the others found about the base parameters.
+      std::vector<const Row*> ranked;
+      for (const auto& r : rows) ranked.push_back(&r);
+      std::stable_sort(ranked.begin(), ranked.end(), [](const Row* a, const Row* b) { return a->fitness < b->fitness; });
+      const Eigen::VectorXd fit = layout.point(m.index, run.best_sets.at(m.candidate->effect));
+      if (fit.size() == 0) continue;
+      std::vector<Eigen::VectorXd> starts = {fit};
+      std::vector<Eigen::VectorXd> taken;
+      for (const Row* r : ranked) {
+        if (r->model == m.index) {
+          taken.push_back(r->x);
+          if (starts.size() < 4) starts.push_back(r->x);
+        }
+      }
+      for (int other = -1; other < layout.models(); ++other) {
+        if (other == m.index) continue;
+        int added = 0;
+        for (const Row* r : ranked) {
+          if (r->model != other || added >= 2) continue;
+          Eigen::VectorXd s = fit;
+          for (Eigen::Index k = 0; k < run.config.space.dimension(); ++k) s(k) = r->x(k);
+          starts.push_back(s);
+          ++added;
+        }
+      }
+      double predicted = 0;
+      Eigen::VectorXd x;
+      model_time([&] { x = propose(emulator, layout, m.index, starts, taken, rng, predicted); });
+      if (x.size() == 0) continue;
+      const std::map<std::string, double> set = complete_parameters(m.fitted, layout.parameters(m.index, x));
+      points.push_back(x);
+      sets.push_back(set);
+      of_model.push_back(i);
+      requests.push_back({&m.extended->config, set, &run.base.residuals});
+      progress(options, "union search, round " + std::to_string(round) + ": base + " + m.candidate->effect +
+                            " predicted at fitness " + format_number(predicted, 4) + " by an emulator of " +
+                            std::to_string(rows.size()) + " runs over " + std::to_string(layout.dimension()) +
+                            " parameters");
+    }
+    if (requests.empty()) break;
+    const std::vector<Evaluation> evaluations = run.runner.evaluate_all(requests);
+    for (std::size_t j = 0; j < evaluations.size(); ++j) {
+      const std::size_t i = of_model[j];
+      const UnionModel& m = models[i];
+      ++proposed[i];
+      ++rounds[i];
+      const Evaluation& e = evaluations[j];
+      if (!e.ok) continue;
+      const Eigen::VectorXd outputs = run_outputs(e, m.fitted, m.cases);
+      if (outputs.size() > 0) rows.push_back({points[j], outputs, curve_fitness(outputs, grid_pointers), m.index});
+      if (std::isfinite(e.error) && e.error < best[i].error) best[i] = {e.error, sets[j]};
+      progress(options, "union search, round " + std::to_string(round) + ": base + " + m.candidate->effect +
+                            " simulated, error " + format_number(e.error, 3) + " N (its calibration's " +
+                            format_number(m.candidate->error, 3) + " N)");
+    }
+  }
+  run.runner.add_model_seconds(model_s);
+
+  // Each candidate's best proposal, judged as its calibration's fit is, where it ran below that fit.
+  for (std::size_t i = 1; i < models.size(); ++i) {
+    EffectCandidate& c = *models[i].candidate;
+    UnionSearch& u = c.union_search;
+    u.rounds = rounds[i];
+    u.simulations = proposed[i];
+    u.training_rows = static_cast<long>(rows.size());
+    u.error_before = c.error;
+    if (!(best[i].error < c.error)) {
+      c.simulations += u.simulations;
+      continue;
+    }
+    const std::vector<Evaluation> runs = runs_with_reruns(models[i].extended->config, models[i].fitted, best[i].set,
+                                                          &run.base.residuals, options.scatter_runs, run.runner);
+    u.simulations += static_cast<long>(runs.size());
+    c.simulations += u.simulations;
+    EffectCandidate judged = c;
+    if (!judge_fit(judged, runs)) continue;
+    u.error_found = judged.error;
+    if (!(judged.error < c.error)) continue;
+    u.kept = true;
+    judged.union_search = u;
+    judged.fitness = Diagnosis::kNaN;  // a direct run: the campaign's objective was not computed
+    std::map<std::string, double> own;
+    for (const auto& name : models[i].fitted.space.free_names()) own[name] = best[i].set.at(name);
+    judged.params = own;
+    c = std::move(judged);
+    run.best_sets[c.effect] = best[i].set;
+    progress(options, "union search: base + " + c.effect + " kept at " + format_number(c.error, 3) + " N (its calibration: " +
+                          format_number(u.error_before, 3) + " N)");
+  }
+}
+
+}  // namespace detail
+}  // namespace demcal::pipelines
