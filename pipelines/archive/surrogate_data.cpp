@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 #include <stdexcept>
 
 using nlohmann::json;
@@ -16,22 +17,19 @@ bool same(double a, double b) { return a == b || std::abs(a - b) <= 1e-12 * std:
 
 }  // namespace
 
-Eigen::VectorXd archived_outputs(const RunArchive& archive, const std::vector<std::int64_t>& run_ids,
-                                 const std::vector<ArchivedCase>& cases) {
-  if (run_ids.size() != cases.size() || cases.empty()) return {};
+Eigen::VectorXd run_outputs(const std::vector<RunCurves>& runs, const std::vector<ArchivedCase>& cases) {
+  if (runs.size() != cases.size() || cases.empty()) return {};
   std::vector<Eigen::VectorXd> parts;
   Eigen::Index total = 0;
   for (size_t k = 0; k < cases.size(); ++k) {
-    if (!cases[k].grid) return {};
-    const auto run = archive.run(run_ids[k]);
-    if (!run) return {};
+    if (!cases[k].grid || !runs[k].curves) return {};
     // scored as the campaign scored it: a collapsed run carries nothing after its collapse
     std::map<std::string, double> ends;
     for (const auto& c : cases[k].grid->channels) ends[c.column] = c.upper;
     smoothing::ObjectiveOptions columns;
     columns.force_column = cases[k].grid->force_column;
-    parts.push_back(curve_outputs(run->status == "collapsed" ? smoothing::continued_after_collapse(run->curves, ends, columns)
-                                                             : run->curves,
+    parts.push_back(curve_outputs(runs[k].status == "collapsed" ? smoothing::continued_after_collapse(*runs[k].curves, ends, columns)
+                                                                : *runs[k].curves,
                                   *cases[k].grid));
     if (parts.back().size() == 0) return {};
     total += parts.back().size();
@@ -43,6 +41,19 @@ Eigen::VectorXd archived_outputs(const RunArchive& archive, const std::vector<st
     offset += part.size();
   }
   return outputs;
+}
+
+Eigen::VectorXd archived_outputs(const RunArchive& archive, const std::vector<std::int64_t>& run_ids,
+                                 const std::vector<ArchivedCase>& cases) {
+  if (run_ids.size() != cases.size() || cases.empty()) return {};
+  std::vector<std::optional<RunRecord>> records;
+  std::vector<RunCurves> runs;
+  for (const auto id : run_ids) {
+    records.push_back(archive.run(id));
+    if (!records.back()) return {};
+  }
+  for (const auto& r : records) runs.push_back({r->status, &r->curves});
+  return run_outputs(runs, cases);
 }
 
 CurveGrid make_curve_grid(const smoothing::Curve& measured, const smoothing::ObjectiveOptions& objective,

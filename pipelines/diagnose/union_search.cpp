@@ -252,25 +252,16 @@ Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, int
   return {};
 }
 
-// The outputs of a run's fitted cases (`fitted`'s names, in order) on their grids; empty when a
-// case failed or has no curve on a channel.
-Eigen::VectorXd run_outputs(const Evaluation& e, const CampaignConfig& fitted, const std::vector<ArchivedCase>& cases) {
-  std::vector<Eigen::VectorXd> parts;
-  Eigen::Index size = 0;
-  for (std::size_t k = 0; k < fitted.cases.size(); ++k) {
-    const auto it = std::find_if(e.cases.begin(), e.cases.end(), [&](const CasePrediction& p) { return p.name == fitted.cases[k].name; });
+// The outputs of a run's fitted cases (`fitted`'s names, in order) on their grids, as the archived
+// runs' are read; empty when a case is missing, failed or has no curve on a channel.
+Eigen::VectorXd fitted_outputs(const Evaluation& e, const CampaignConfig& fitted, const std::vector<ArchivedCase>& cases) {
+  std::vector<RunCurves> runs;
+  for (const auto& c : fitted.cases) {
+    const auto it = std::find_if(e.cases.begin(), e.cases.end(), [&](const CasePrediction& p) { return p.name == c.name; });
     if (it == e.cases.end() || it->status == "failed") return {};
-    parts.push_back(curve_outputs(it->simulated, *cases[k].grid));
-    if (parts.back().size() == 0) return {};
-    size += parts.back().size();
+    runs.push_back({it->status, &it->simulated});
   }
-  Eigen::VectorXd outputs(size);
-  Eigen::Index at = 0;
-  for (const auto& p : parts) {
-    outputs.segment(at, p.size()) = p;
-    at += p.size();
-  }
-  return outputs;
+  return run_outputs(runs, cases);
 }
 
 }  // namespace
@@ -396,7 +387,7 @@ void search_union(DiagnosisRun& run) {
       ++rounds[i];
       const Evaluation& e = evaluations[j];
       if (!e.ok) continue;
-      const Eigen::VectorXd outputs = run_outputs(e, m.fitted, m.cases);
+      const Eigen::VectorXd outputs = fitted_outputs(e, m.fitted, m.cases);
       if (outputs.size() > 0) rows.push_back({points[j], outputs, curve_fitness(outputs, grid_pointers), m.index});
       if (std::isfinite(e.error) && e.error < best[i].error) best[i] = {e.error, sets[j]};
       progress(options, "union search, round " + std::to_string(round) + ": base + " + m.candidate->effect +

@@ -67,8 +67,16 @@ struct ArchivedCase {
   std::shared_ptr<const CurveGrid> grid = nullptr;
 };
 
-// The outputs of one parameter set's runs (run_ids: one per case, in case order), concatenated;
-// empty when a case has no grid or a run no outputs.
+// One case's run as run_outputs reads it: its status ("collapsed" continues the curves at zero force
+// to the end of the grid, as the campaign scores it) and its curves.
+struct RunCurves {
+  std::string status;
+  const smoothing::Curve* curves = nullptr;
+};
+// The outputs of one parameter set's runs (one per case, in case order), concatenated; empty when a
+// case has no grid or curves or a run no outputs.
+Eigen::VectorXd run_outputs(const std::vector<RunCurves>& runs, const std::vector<ArchivedCase>& cases);
+// The same for archived runs (run_ids: one per case, in case order).
 Eigen::VectorXd archived_outputs(const RunArchive& archive, const std::vector<std::int64_t>& run_ids,
                                  const std::vector<ArchivedCase>& cases);
 
