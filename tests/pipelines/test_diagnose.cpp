@@ -1412,6 +1412,17 @@ json small_search_campaign(const fs::path& dir, const std::string& name) {
   return j;
 }
 
+// The options of a diagnosis on the small search: a few runs per calibration, no progress line.
+DiagnoseOptions small_search_options(const fs::path& out, std::vector<std::string> effects) {
+  DiagnoseOptions o;
+  o.out = out.string();
+  o.effects = std::move(effects);
+  o.candidate_simulations = 8;  // two populations, the least a candidate is calibrated with
+  o.profile_simulations = 2;
+  o.progress = false;
+  return o;
+}
+
 }  // namespace
 
 // The reduced goal test on an engine-made measurement (docs/journal/diagnose-studies.md; the
@@ -1459,13 +1470,8 @@ INSTANTIATE_TEST_SUITE_P(DiagnoseLoop, HiddenCohesion, ::testing::Values(test_su
 TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
   const fs::path dir = test_support::fresh_dir("diagnose", "small");
   const json j = small_search_campaign(dir, "small");
-  DiagnoseOptions o;
-  o.out = (dir / "out").string();
-  o.effects = {"support-compliance"};
-  o.candidate_simulations = 8;  // two populations, the least a candidate is calibrated with
-  o.profile_simulations = 2;
-  o.progress = false;
-  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "small.json"), o);
+  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "small.json"),
+                                    small_search_options(dir / "out", {"support-compliance"}));
   ASSERT_EQ(d.status, CampaignStatus::completed) << d.message;
   EXPECT_TRUE(std::isfinite(d.error_before));
   EXPECT_TRUE(std::isfinite(d.error_after));
@@ -1494,14 +1500,9 @@ TEST(DiagnoseLoop, TheUnionSearchProposesAPointPerCandidateEachRound) {
   const fs::path dir = test_support::fresh_dir("diagnose", "union");
   const json j = small_search_campaign(dir, "union");
   const auto diagnose = [&](const std::string& name, int rounds) {
-    DiagnoseOptions o;
-    o.out = (dir / name).string();
-    o.effects = {"support-compliance", "friction-softening"};
+    DiagnoseOptions o = small_search_options(dir / name, {"support-compliance", "friction-softening"});
     o.candidates = 2;
-    o.candidate_simulations = 8;
-    o.profile_simulations = 2;
     o.union_rounds = rounds;
-    o.progress = false;
     return run_diagnosis(campaign_from_json(j, dir.string(), "union.json"), o);
   };
   const Diagnosis without = diagnose("without", 0);
@@ -1553,14 +1554,9 @@ TEST(DiagnoseLoop, StagesSideBySideGiveTheDiagnosisOfOneAfterAnother) {
   const fs::path dir = test_support::fresh_dir("diagnose", "side-by-side");
   const json j = small_search_campaign(dir, "side-by-side");
   const auto diagnosis_json = [&](const std::string& name, long max_simulations) {
-    DiagnoseOptions o;
-    o.out = (dir / name).string();
-    o.effects = {"support-compliance", "friction-softening"};
+    DiagnoseOptions o = small_search_options(dir / name, {"support-compliance", "friction-softening"});
     o.candidates = 2;
-    o.candidate_simulations = 8;
-    o.profile_simulations = 2;
     o.max_simulations = max_simulations;
-    o.progress = false;
     const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "side-by-side.json"), o);
     EXPECT_EQ(d.status, CampaignStatus::completed) << d.message;
     EXPECT_GE(std::count_if(d.candidates.begin(), d.candidates.end(), [](const EffectCandidate& c) { return c.tried; }), 2)
@@ -1587,13 +1583,8 @@ TEST(DiagnoseLoop, ABaseFitComparedOverASliverOfAGaugeIsComparedOverItAll) {
     if (column.name == "abutment_horizontal")
       for (double& v : column.values) v *= 20;
   smoothing::write_curve(measured, j["measured"].get<std::string>());
-  DiagnoseOptions o;
-  o.out = (dir / "out").string();
-  o.effects = {"support-compliance"};
-  o.candidate_simulations = 8;
-  o.profile_simulations = 2;
-  o.progress = false;
-  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "widened.json"), o);
+  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "widened.json"),
+                                    small_search_options(dir / "out", {"support-compliance"}));
   ASSERT_EQ(d.status, CampaignStatus::completed) << d.message;
   ASSERT_EQ(d.widened_window.size(), 1u);
   EXPECT_EQ(d.widened_window.begin()->first, "main/abutment_horizontal");
