@@ -336,13 +336,13 @@ void search_union(DiagnosisRun& run) {
     std::vector<std::size_t> of_model;
     std::vector<Eigen::VectorXd> points;
     std::vector<std::map<std::string, double>> sets;
+    std::vector<const Row*> ranked;
+    for (const auto& r : rows) ranked.push_back(&r);
+    std::stable_sort(ranked.begin(), ranked.end(), [](const Row* a, const Row* b) { return a->fitness < b->fitness; });
     for (std::size_t i = 1; i < models.size(); ++i) {
       const UnionModel& m = models[i];
       // Starts: the model's own best runs, then the base's and every other model's, each with this
       // model's parameters at its calibration's best: what the others found about the base parameters.
-      std::vector<const Row*> ranked;
-      for (const auto& r : rows) ranked.push_back(&r);
-      std::stable_sort(ranked.begin(), ranked.end(), [](const Row* a, const Row* b) { return a->fitness < b->fitness; });
       const Eigen::VectorXd fit = layout.point(m.index, run.best_sets.at(m.candidate->effect));
       if (fit.size() == 0) continue;
       std::vector<Eigen::VectorXd> starts = {fit};
