@@ -1,11 +1,14 @@
-// Smoothing benchmarks: the neural smoother (one curve, twenty curves batched; both backends),
+// Smoothing benchmarks: the neural smoother (one curve, twenty curves batched; both backends), the
+// surrogate's regression ensemble (both backends),
 // objective 1 and 2 (ten runs batched; one run, its channels on one or two threads), reading a lab
 // curve. `bench_smoothing --comparison` prints instead the table of smoothers against the synthetic
 // truth (docs/smoothing.md).
+#include "demcal/smoothing/regression_ensemble.hpp"
 #include "demcal/smoothing/smoothing.hpp"
 
 #include <benchmark/benchmark.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -71,6 +74,49 @@ void BM_Objective2OneRun(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(objective.evaluate(run));
 }
 BENCHMARK(BM_Objective2OneRun)->Arg(1)->Arg(2)->ArgName("curve_threads")->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+// The surrogate's curve ensemble training (regression_ensemble.hpp) at the `mlp` kind's defaults:
+// five members, 2 x 32 tanh, 82 outputs (two channels of 41 grid points), a full fit of 2000 epochs
+// on `rows` runs of `inputs` parameters; each backend.
+RegressionBatch regression_batch(std::int64_t rows, std::int64_t inputs, RegressionBackend backend) {
+  RegressionBatch b;
+  b.members = 5;
+  b.rows = rows;
+  b.inputs = inputs;
+  b.outputs = 82;
+  b.epochs = 2000;
+  b.learning_rate = 0.01;
+  b.final_learning_rate = 0.0005;
+  b.weight_decay = 0.1;
+  b.backend = backend;
+  std::uint64_t state = 12345;
+  const auto next = [&] {
+    state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+    return static_cast<float>((state >> 40) * (1.0 / 16777216.0));
+  };
+  for (std::int64_t i = 0; i < rows; ++i) {
+    float s = 0;
+    for (std::int64_t k = 0; k < inputs; ++k) {
+      b.x.push_back(2 * next() - 1);
+      s += b.x.back();
+    }
+    for (std::int64_t k = 0; k < b.outputs; ++k) b.y.push_back(std::tanh(s * static_cast<float>(k + 1) / 40));
+  }
+  for (std::int64_t m = 0; m < b.members * rows; ++m) b.row_weight.push_back(std::floor(2 * next()));
+  const std::int64_t count = regression_parameter_count(inputs, b.outputs, b.hidden_layers, b.hidden_width);
+  for (std::int64_t q = 0; q < b.members * count; ++q) b.initial_parameters.push_back(0.3f * (2 * next() - 1));
+  return b;
+}
+
+void BM_RegressionEnsemble(benchmark::State& state) {
+  const RegressionBackend backend = state.range(2) ? RegressionBackend::libtorch : RegressionBackend::native;
+  RegressionBatch b = regression_batch(state.range(0), state.range(1), backend);
+  b.threads = static_cast<int>(state.range(3));
+  for (auto _ : state) benchmark::DoNotOptimize(train_regression_ensemble(b));
+  state.SetLabel(to_string(backend));
+}
+BENCHMARK(BM_RegressionEnsemble)->ArgsProduct({{40, 160}, {3, 9}, {0, 1}, {1, 2}})
+    ->ArgNames({"rows", "inputs", "libtorch", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_ReadLabCurve(benchmark::State& state) {
   const std::string path = std::string(DEMCAL_SOURCE_DIR) +

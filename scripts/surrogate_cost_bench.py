@@ -29,6 +29,7 @@ ROWS = [  # label, algorithm, simulations, surrogate options (None = off)
     ("bo, default", "bo", 60, {"kind": "mlp"}),
     ("bo, batch = workers, no cost adaptation", "bo", 60, {"kind": "mlp", "cost_ratio": "inf"}),
     ("bo, one point per round, full refits", "bo", 60, {"kind": "mlp", "batch": 1, "refit_growth": 1, "cost_ratio": "inf"}),
+    ("bo, default, LibTorch training", "bo", 60, {"kind": "mlp", "mlp": {"backend": "libtorch"}}),
 ]
 
 

@@ -316,6 +316,7 @@ void search_union(DiagnosisRun& run) {
   }
   surrogate::MlpOptions mlp = run.config.surrogate.options.mlp;
   mlp.seed = static_cast<std::uint64_t>(run.config.optimiser.seed);
+  mlp.threads = std::max(1, hardware_threads());
   Emulator emulator(grid_pointers, mlp);
   std::mt19937_64 rng(static_cast<std::uint64_t>(run.config.optimiser.seed) * 0x9e3779b97f4a7c15ULL + 7);
 

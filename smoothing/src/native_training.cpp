@@ -16,26 +16,6 @@ namespace demcal::smoothing::detail {
 
 namespace {
 
-// Rational approximation of tanh (the coefficients of Eigen's generic_fast_tanh_float), accurate to
-// a few float ulps, branch-free so that loops over it vectorise.
-inline float fast_tanh(float v) {
-  constexpr float kClamp = 7.90531110763549805f;
-  const float low = v < -kClamp ? -kClamp : v;  // ternaries map onto vector min/max
-  const float x = low > kClamp ? kClamp : low;
-  const float x2 = x * x;
-  float p = x2 * -2.76076847742355e-16f + 2.00018790482477e-13f;
-  p = x2 * p + -8.60467152213735e-11f;
-  p = x2 * p + 5.12229709037114e-08f;
-  p = x2 * p + 1.48572235717979e-05f;
-  p = x2 * p + 6.37261928875436e-04f;
-  p = x2 * p + 4.89352455891786e-03f;
-  p = x * p;
-  float q = x2 * 1.19825839466702e-06f + 1.18534705686654e-04f;
-  q = x2 * q + 2.26843463243900e-03f;
-  q = x2 * q + 4.89352518554385e-03f;
-  return p / q;
-}
-
 // Sum of a[k] * b[k] with eight partial sums, so the loop vectorises without reassociation flags.
 inline float dot(const float* a, const float* b, std::int64_t n) {
   float partial[8] = {0, 0, 0, 0, 0, 0, 0, 0};
@@ -65,23 +45,21 @@ void train_curve(const TrainingBatch& tb, const SmootherOptions& options, std::i
     activation[l + 1].resize(static_cast<std::size_t>(n * tb.layers[l].out));
   }
   std::vector<float> delta(static_cast<std::size_t>(n * widest)), next_delta(delta.size());
+  std::vector<float> transposed(static_cast<std::size_t>(widest * widest));  // a layer's Wᵀ
 
-  auto forward = [&]() {
+  // Inlined into each target clone: out of line it would be compiled for the default target alone.
+  auto forward = [&]() __attribute__((always_inline)) {
     for (std::size_t l = 0; l < layers; ++l) {
       const auto& s = tb.layers[l];
       const float* W = p.data() + s.weight_offset;
       const float* b = p.data() + s.bias_offset;
       const float* h = activation[l].data();
       float* z = activation[l + 1].data();
-      for (std::int64_t j = 0; j < s.out; ++j) {
-        float* zj = z + j * n;
-        for (std::int64_t k = 0; k < n; ++k) zj[k] = b[j];
-        for (std::int64_t i = 0; i < s.in; ++i) {
-          const float wij = W[i * s.out + j];
-          const float* hi = h + i * n;
-          for (std::int64_t k = 0; k < n; ++k) zj[k] += wij * hi[k];
-        }
-      }
+      // z[out][n] = b + Wᵀ h, summed over the inputs in order
+      for (std::int64_t j = 0; j < s.out; ++j)
+        for (std::int64_t k = 0; k < n; ++k) z[j * n + k] = b[j];
+      transpose(W, transposed.data(), s.in, s.out);
+      multiply_add(transposed.data(), h, z, s.out, s.in, n);
       if (l + 1 < layers)
         for (std::int64_t k = 0; k < n * s.out; ++k) z[k] = fast_tanh(z[k]);
     }
@@ -109,19 +87,10 @@ void train_curve(const TrainingBatch& tb, const SmootherOptions& options, std::i
         for (std::int64_t i = 0; i < s.in; ++i) gW[i * s.out + j] = dot(h + i * n, dj, n);
       }
       if (l == 0) break;
-      // delta_prev[i] = (sum_j W[i][j] delta[j]) * (1 - h[i]^2)
-      const float* W = p.data() + s.weight_offset;
-      for (std::int64_t i = 0; i < s.in; ++i) {
-        float* ndi = next_delta.data() + i * n;
-        for (std::int64_t k = 0; k < n; ++k) ndi[k] = 0.0f;
-        for (std::int64_t j = 0; j < s.out; ++j) {
-          const float wij = W[i * s.out + j];
-          const float* dj = delta.data() + j * n;
-          for (std::int64_t k = 0; k < n; ++k) ndi[k] += wij * dj[k];
-        }
-        const float* hi = h + i * n;
-        for (std::int64_t k = 0; k < n; ++k) ndi[k] *= 1.0f - hi[k] * hi[k];
-      }
+      // delta_prev[i] = (sum_j W[i][j] delta[j]) * (1 - h[i]^2), summed over the outputs in order
+      for (std::int64_t q = 0; q < s.in * n; ++q) next_delta[static_cast<std::size_t>(q)] = 0.0f;
+      multiply_add(p.data() + s.weight_offset, delta.data(), next_delta.data(), s.in, s.out, n);
+      for (std::int64_t q = 0; q < s.in * n; ++q) next_delta[static_cast<std::size_t>(q)] *= 1.0f - h[q] * h[q];
       std::swap(delta, next_delta);
     }
     const double t = epoch + 1;

@@ -122,6 +122,7 @@ std::vector<float> train_regression_ensemble(const RegressionBatch& b) {
       b.epochs < 1 || b.threads < 1 || b.x.size() != size(b.rows, b.inputs) || b.y.size() != size(b.rows, b.outputs) ||
       b.row_weight.size() != size(b.members, b.rows) || b.initial_parameters.size() != size(b.members, parameters))
     throw std::invalid_argument("train_regression_ensemble: the batch's sizes disagree");
+  if (b.backend == RegressionBackend::native) return detail::train_regression_native(b);
   std::vector<float> trained;
   std::string error;
   const std::lock_guard<std::mutex> one_at_a_time(training_mutex());

@@ -14,7 +14,7 @@
 
 namespace demcal::smoothing::detail {
 
-inline constexpr int kTorchPluginAbi = 2;
+inline constexpr int kTorchPluginAbi = 3;
 
 // int demcal_torch_plugin_abi(): the plugin's kTorchPluginAbi.
 using TorchPluginAbiFunction = int (*)();

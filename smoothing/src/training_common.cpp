@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 namespace demcal::smoothing {
 
@@ -17,6 +18,14 @@ std::int64_t regression_parameter_count(std::int64_t inputs, std::int64_t output
     in = hidden_width;
   }
   return count + in * outputs + outputs;
+}
+
+std::string to_string(RegressionBackend backend) { return backend == RegressionBackend::native ? "native" : "libtorch"; }
+
+RegressionBackend parse_regression_backend(const std::string& name) {
+  if (name == "native") return RegressionBackend::native;
+  if (name == "libtorch") return RegressionBackend::libtorch;
+  throw std::invalid_argument("'" + name + "': must be \"native\" or \"libtorch\"");
 }
 
 namespace detail {

@@ -35,6 +35,7 @@ void MlpOptions::Validate() const {
   if (!(refit_learning_rate >= final_learning_rate) || !(refit_learning_rate <= learning_rate))
     fail("refit_learning_rate = " + format_number(refit_learning_rate, round_trip_digits) +
          " must be in [final_learning_rate, learning_rate]");
+  if (threads < 1) fail("threads = " + std::to_string(threads) + " must be >= 1");
   limits::require_within(limits::Limit::epochs, epochs, "surrogate mlp.epochs");
   limits::require_within(limits::Limit::epochs, refit_epochs, "surrogate mlp.refit_epochs");
   limits::require_within(limits::Limit::network_weights, 1.0 * members * hidden_layers * hidden_width * hidden_width,
@@ -56,6 +57,8 @@ const FieldTable<MlpOptions>& mlp_fields() {
       field("seed", &MlpOptions::seed),
       field("refit_epochs", &MlpOptions::refit_epochs),
       field("refit_learning_rate", &MlpOptions::refit_learning_rate),
+      named_field("backend", &MlpOptions::backend, smoothing::parse_regression_backend,
+                  [](smoothing::RegressionBackend b) { return smoothing::to_string(b); }),
   };
   return table;
 }
@@ -110,6 +113,9 @@ smoothing::RegressionBatch CurveEnsemble::training_batch(const Eigen::MatrixXd& 
   batch.learning_rate = options.learning_rate;
   batch.final_learning_rate = options.final_learning_rate;
   batch.weight_decay = options.weight_decay;
+  batch.backend = options.backend;
+  // LibTorch keeps one intra-op thread: its repeats are bit-identical only so.
+  batch.threads = options.backend == smoothing::RegressionBackend::native ? options.threads : 1;
   for (Eigen::Index i = 0; i < n; ++i) {
     for (Eigen::Index k = 0; k < d; ++k) batch.x.push_back(static_cast<float>(2 * X(i, k) - 1));
     for (Eigen::Index k = 0; k < m; ++k) batch.y.push_back(static_cast<float>((Y(i, k) - mean_[k]) / scale_[k]));

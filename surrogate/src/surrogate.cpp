@@ -56,6 +56,12 @@ void split_curve_rows(const std::vector<TrainingRow>& rows, Eigen::MatrixXd& X, 
 
 }  // namespace
 
+MlpOptions SurrogateModel::mlp_options() const {
+  MlpOptions mlp = options_.mlp;
+  mlp.threads = options_.threads;
+  return mlp;
+}
+
 bool SurrogateModel::fit(const std::vector<TrainingRow>& all_rows) {
   options_.Validate();
   const auto rows = select_training_rows(all_rows, options_.max_training_runs);
@@ -70,7 +76,7 @@ bool SurrogateModel::fit(const std::vector<TrainingRow>& all_rows) {
     mlp_log_ = options_.gp.log_transform != LogTransform::never && (y.array() > 0).all();
     if (options_.gp.log_transform == LogTransform::always && !mlp_log_)
       throw std::invalid_argument("surrogate mlp: log_transform 'always' with a fitness <= 0");
-    ensemble_.fit(X, Y, options_.mlp);
+    ensemble_.fit(X, Y, mlp_options());
     classifier_.fit(rows);
     const Eigen::ArrayXd targets = mlp_log_ ? Eigen::ArrayXd(y.array().log()) : Eigen::ArrayXd(y.array());
     mlp_prior_sd_ = std::sqrt((targets - targets.mean()).square().mean());
@@ -95,7 +101,7 @@ bool SurrogateModel::update(const std::vector<TrainingRow>& all_rows) {
   Eigen::VectorXd y;
   split_curve_rows(rows, X, Y, y);
   if (mlp_log_ && !(y.array() > 0).all()) return false;  // the model space no longer fits the rows
-  if (!ensemble_.refine(X, Y, options_.mlp)) return false;
+  if (!ensemble_.refine(X, Y, mlp_options())) return false;
   rows_ = static_cast<long>(rows.size());
   classifier_.fit(rows);
   const Eigen::ArrayXd targets = mlp_log_ ? Eigen::ArrayXd(y.array().log()) : Eigen::ArrayXd(y.array());

@@ -1,5 +1,6 @@
-// The "mlp" kind: an ensemble of MLPs (trained with LibTorch in the plugin) that predicts curves,
-// scored by its owner's fitness of a curve, on synthetic problems with a known answer.
+// The "mlp" kind: an ensemble of MLPs (trained by the native loops, or with LibTorch in the plugin)
+// that predicts curves, scored by its owner's fitness of a curve, on synthetic problems with a known
+// answer.
 #include "demcal/surrogate/curve_ensemble.hpp"
 #include "demcal/surrogate/surrogate.hpp"
 
@@ -127,6 +128,53 @@ TEST(CurveEnsemble, RefineOnMoreRowsMatchesAFreshFit) {
   MlpOptions other = o;
   other.members = 3;
   EXPECT_FALSE(refined.refine(X60, Y60, other)) << "another ensemble's shape";
+}
+
+// The two training backends train the same networks: after a few steps (before the training's own
+// sensitivity amplifies round-off) their members agree to float round-off; after a full fit both
+// predict held-out curves well. The native one gives the same members on any thread count.
+TEST(CurveEnsemble, NativeAndLibtorchBackendsTrainTheSameNetworks) {
+  const auto rows = rows_of(60, 1), test = rows_of(40, 2);
+  Eigen::MatrixXd X, Y;
+  to_matrices(rows, X, Y);
+  MlpOptions few;
+  few.epochs = 20;
+  MlpOptions torch = few;
+  torch.backend = demcal::smoothing::RegressionBackend::libtorch;
+  CurveEnsemble native, libtorch;
+  ASSERT_TRUE(native.fit(X, Y, few));
+  ASSERT_TRUE(libtorch.fit(X, Y, torch));
+  for (const auto& r : test)
+    for (int m = 0; m < native.members(); ++m) {
+      const Eigen::VectorXd a = native.predict(m, r.unit), b = libtorch.predict(m, r.unit);
+      EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-4 * (1 + b.cwiseAbs().maxCoeff())) << "member " << m;
+    }
+  MlpOptions threads = few;
+  threads.threads = 3;
+  CurveEnsemble side_by_side;
+  ASSERT_TRUE(side_by_side.fit(X, Y, threads));
+  for (int m = 0; m < native.members(); ++m)
+    EXPECT_EQ((side_by_side.predict(m, test[0].unit) - native.predict(m, test[0].unit)).norm(), 0.0) << "member " << m;
+  MlpOptions full;
+  torch = full;
+  torch.backend = demcal::smoothing::RegressionBackend::libtorch;
+  ASSERT_TRUE(native.fit(X, Y, full));
+  ASSERT_TRUE(libtorch.fit(X, Y, torch));
+  const double native_rms = held_out_rms(native, test), libtorch_rms = held_out_rms(libtorch, test);
+  EXPECT_LT(native_rms, 0.02);
+  EXPECT_LT(libtorch_rms, 0.02);
+  // the backend is part of the options' JSON (a campaign's key), the thread count is not
+  EXPECT_EQ(torch.to_json().at("backend"), "libtorch");
+  EXPECT_FALSE(threads.to_json().contains("threads"));
+  EXPECT_EQ(MlpOptions::from_json(torch.to_json(), "test").backend, torch.backend);
+  nlohmann::json bad = full.to_json();
+  bad["backend"] = "cuda";
+  try {
+    MlpOptions::from_json(bad, "campaign.json: surrogate.mlp");
+    ADD_FAILURE() << "an unknown backend was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cuda"), std::string::npos) << e.what();
+  }
 }
 
 TEST(SurrogateModel, MlpKindScoresPredictedCurvesWithItsOwnersFitness) {

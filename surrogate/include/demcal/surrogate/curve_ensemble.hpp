@@ -5,7 +5,8 @@
 // of the same scene: the owner turns each member's predicted curves into a fitness, and the members'
 // spread is the prediction's uncertainty (SurrogateModel, surrogate.hpp).
 //
-// Training (LibTorch, in the plugin: smoothing/regression_ensemble.hpp): inputs 2u − 1, outputs
+// Training (smoothing/regression_ensemble.hpp: the native loops by default, LibTorch's plugin with
+// "backend": "libtorch"): inputs 2u − 1, outputs
 // standardised per column over the training rows; each member starts from its own Glorot-uniform
 // draw and, with `bootstrap`, weighs each row by a Poisson(1) count drawn from the row's point (a
 // bootstrap that gives a row the same weight whatever rows join it), so the members disagree where
@@ -40,6 +41,12 @@ struct MlpOptions {
   int refit_epochs = 300;             // Adam steps of refine(), >= 1
   double refit_learning_rate = 0.002; // refine()'s first learning rate (cosine to final_learning_rate),
                                       // in [final_learning_rate, learning_rate]
+  // Training backend, "native" or "libtorch" (regression_ensemble.hpp): the same networks, equal to
+  // round-off, so the choice is part of a campaign's result-defining key.
+  smoothing::RegressionBackend backend = smoothing::RegressionBackend::native;
+  // Members trained side by side ("native"; LibTorch trains on one thread). Not part of the options'
+  // JSON: results do not depend on it. The owner sets it (SurrogateOptions::threads).
+  int threads = 1;
   // Throws std::invalid_argument naming the option and value.
   void Validate() const;
   nlohmann::json to_json() const;
@@ -49,7 +56,7 @@ struct MlpOptions {
 class CurveEnsemble {
  public:
   // X: [rows][dimension] unit points; Y: [rows][outputs]. Returns false with fewer than 3 rows.
-  // Throws std::runtime_error when the LibTorch plugin cannot be loaded.
+  // Throws std::runtime_error when the LibTorch plugin is asked for and cannot be loaded.
   bool fit(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const MlpOptions& options);
   // Continues training from the current weights on these rows (options.refit_epochs steps from
   // options.refit_learning_rate). Returns false, changing nothing, when not fitted, with fewer than

@@ -124,9 +124,10 @@ struct SurrogateOptions {
   // from the first model on, every round proposes with the model fitted while the round before it
   // was simulated, its points penalised as the round's own: the same choices on any machine.
   std::string overlap = "auto";
-  // Threads that score the acquisition's candidate points ("bo"). Not part of the options' JSON:
-  // results do not depend on it. (Training stays on one thread: LibTorch's matrix products call a
-  // BLAS that may not be safe to call from two threads at once, and results then differed run to run.)
+  // Threads that score the acquisition's candidate points ("bo") and train the "mlp" kind's members
+  // side by side (its native backend; LibTorch's training stays on one thread: its matrix products
+  // call a BLAS that may not be safe to call from two threads at once). Not part of the options'
+  // JSON: results do not depend on it.
   int threads = 1;
   GpOptions gp;                      // "gp"; its log_transform also rules the "mlp" kind's
   MlpOptions mlp;                    // "mlp"
@@ -190,6 +191,7 @@ class SurrogateModel {
 
  private:
   double set_incumbent(const std::vector<TrainingRow>& rows);
+  MlpOptions mlp_options() const;   // options_.mlp trained on options_.threads
   SurrogateOptions options_;
   CurveHooks hooks_;
   GaussianProcess gp_;
