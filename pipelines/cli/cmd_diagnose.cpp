@@ -98,6 +98,10 @@ void setup(CLI::App& app) {
   sub->add_option("--surrogate-kind", o.surrogate_kind, "Surrogate of the refinement's and candidates' searches: gp | mlp")
       ->capture_default_str()
       ->check(CLI::IsMember({"gp", "mlp"}));
+  sub->add_option("--surrogate-backend", o.surrogate_backend,
+                  "Training of the mlp surrogate in every calibration of the diagnosis: libtorch | native")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"libtorch", "native"}));
   sub->add_option("--evidence", o.evidence, "Criterion fall needed to accept an effect")->capture_default_str();
   sub->add_option("--tie-margin", o.tie_margin,
                   "Effects whose criteria are closer than this are tied (the data cannot tell them apart)")

@@ -59,6 +59,8 @@ void DiagnoseOptions::Validate() const {
   at_least("--held-out-ratio", held_out_ratio, 1);
   if (candidate_algorithm.empty()) fail("--candidate-algorithm", "\"\"", "must name an optimiser");
   if (surrogate_kind != "gp" && surrogate_kind != "mlp") fail("--surrogate-kind", "\"" + surrogate_kind + "\"", "must be gp or mlp");
+  if (surrogate_backend != "native" && surrogate_backend != "libtorch")
+    fail("--surrogate-backend", "\"" + surrogate_backend + "\"", "must be native or libtorch");
   at_least("--candidate-starts", candidate_starts, 1);
   share("start_separation", start_separation);
   if (!(candidate_initial_step > 0 && candidate_initial_step <= 0.5))
@@ -169,7 +171,9 @@ Diagnosis run_diagnosis(const CampaignConfig& config, const DiagnoseOptions& opt
   const auto start = std::chrono::steady_clock::now();
   check_diagnosable(config, options);
   fs::create_directories(options.out);
-  DiagnosisRun run(config, options);
+  CampaignConfig pinned = config;  // every calibration of the diagnosis derives from this one
+  pinned.surrogate.options.mlp.backend = smoothing::parse_regression_backend(options.surrogate_backend);
+  DiagnosisRun run(pinned, options);
   fit_base(run);
   diagnose_from_base(run);
   add_further_effects(run);

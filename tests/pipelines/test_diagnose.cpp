@@ -1220,6 +1220,9 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   expect_rejected(o, "--close-candidate-share 0", "a share of the last tried effect's signature of 0");
   o.close_candidate_share = 2;
   expect_rejected(o, "--close-candidate-share 2", "a share above 1");
+  o = DiagnoseOptions{};
+  o.surrogate_backend = "cuda";
+  expect_rejected(o, "--surrogate-backend \"cuda\"", "an unknown training backend");
 }
 
 // A base calibration reused with --result must be one of the campaign's parameters: otherwise the
@@ -1492,6 +1495,14 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
     EXPECT_TRUE(written.contains(key)) << key;
   for (const char* file : {"report.md", "archive.sqlite", "base/result.json"}) EXPECT_TRUE(fs::exists(dir / "out" / file)) << file;
   EXPECT_TRUE(fs::exists(dir / "out" / "candidates" / "support-compliance" / "result.json"));
+  // every calibration with a surrogate trains it as --surrogate-backend says
+  int with_surrogate = 0;
+  for (const CampaignRecord& c : RunArchive((dir / "out" / "archive.sqlite").string()).campaigns()) {
+    if (!c.config.contains("surrogate")) continue;
+    ++with_surrogate;
+    EXPECT_EQ(c.config.at("surrogate").at("mlp").at("backend"), DiagnoseOptions{}.surrogate_backend) << c.name;
+  }
+  EXPECT_GE(with_surrogate, 2) << "the refinement and the candidate search with bo";
 }
 
 // The union search on the small search: its rounds propose a point per candidate, each simulated

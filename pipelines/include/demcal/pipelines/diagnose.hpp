@@ -295,6 +295,12 @@ struct DiagnoseOptions {
   // --surrogate-kind: "gp" | "mlp", whatever the campaign's. "mlp" models the curves, so its
   // searches find the narrow valley a change of mechanism makes in the objective.
   std::string surrogate_kind = "mlp";
+  // --surrogate-backend: how the "mlp" kind's ensemble is trained in every calibration and search
+  // of the diagnosis, whatever the campaign's: "libtorch" (the training every measured table of
+  // docs/diagnose.md was made with, which the diagnosis keeps) or "native" (the campaign default;
+  // smoothing/regression_ensemble.hpp). The two train the same networks to round-off, so each
+  // search becomes another realisation of itself.
+  std::string surrogate_backend = "libtorch";
   // --held-out: cases left out of every calibration (at least one must stay); channels of weight 0
   // are not fitted either. Those the base fit reproduces (RMS at most `held_out_ratio` x their
   // noise, --held-out-ratio) check the fits: an effect whose fit makes them worse by more than the
