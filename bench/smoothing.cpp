@@ -5,6 +5,7 @@
 // truth (docs/smoothing.md).
 #include "demcal/smoothing/regression_ensemble.hpp"
 #include "demcal/smoothing/smoothing.hpp"
+#include "demcal/surrogate/curve_ensemble.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -79,15 +80,18 @@ BENCHMARK(BM_Objective2OneRun)->Arg(1)->Arg(2)->ArgName("curve_threads")->Unit(b
 // five members, 2 x 32 tanh, 82 outputs (two channels of 41 grid points), a full fit of 2000 epochs
 // on `rows` runs of `inputs` parameters; each backend.
 RegressionBatch regression_batch(std::int64_t rows, std::int64_t inputs, RegressionBackend backend) {
+  const demcal::surrogate::MlpOptions defaults;
   RegressionBatch b;
-  b.members = 5;
+  b.members = defaults.members;
   b.rows = rows;
   b.inputs = inputs;
   b.outputs = 82;
-  b.epochs = 2000;
-  b.learning_rate = 0.01;
-  b.final_learning_rate = 0.0005;
-  b.weight_decay = 0.1;
+  b.hidden_layers = defaults.hidden_layers;
+  b.hidden_width = defaults.hidden_width;
+  b.epochs = defaults.epochs;
+  b.learning_rate = defaults.learning_rate;
+  b.final_learning_rate = defaults.final_learning_rate;
+  b.weight_decay = defaults.weight_decay;
   b.backend = backend;
   std::uint64_t state = 12345;
   const auto next = [&] {

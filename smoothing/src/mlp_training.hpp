@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <vector>
 
 namespace demcal::smoothing::detail {
@@ -142,6 +143,10 @@ template <int Rows>
   for (std::int64_t r = 0; r < rows; ++r)
     for (std::int64_t c = 0; c < cols; ++c) out[c * rows + r] = in[r * cols + c];
 }
+
+// Calls task(0 .. tasks-1), each once, on up to `threads` threads (the caller's among them); the
+// first exception a task throws is rethrown after every thread has finished.
+void run_tasks(std::int64_t tasks, std::int64_t threads, const std::function<void(std::int64_t)>& task);
 
 TrainingOutput train_native(const TrainingBatch& batch, const SmootherOptions& options);
 // The regression ensemble's native backend (native_regression.cpp); the batch already checked.

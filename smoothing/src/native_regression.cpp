@@ -5,11 +5,7 @@
 #include "mlp_training.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <cstring>
-#include <exception>
-#include <thread>
 
 namespace demcal::smoothing::detail {
 
@@ -110,23 +106,8 @@ std::vector<float> train_regression_native(const RegressionBatch& rb) {
     in = out;
   }
   std::vector<float> trained = rb.initial_parameters;
-  const std::int64_t threads = std::max<std::int64_t>(1, std::min<std::int64_t>(rb.threads, rb.members));
-  std::atomic<std::int64_t> next{0};
-  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(threads));
-  const auto work = [&](std::size_t worker) {
-    try {
-      for (std::int64_t member; (member = next++) < rb.members;)
-        train_member(rb, shape, member, trained.data() + member * offset);
-    } catch (...) {
-      errors[worker] = std::current_exception();
-    }
-  };
-  std::vector<std::thread> pool;
-  for (std::size_t t = 1; t < errors.size(); ++t) pool.emplace_back(work, t);
-  work(0);
-  for (auto& t : pool) t.join();
-  for (const auto& e : errors)
-    if (e) std::rethrow_exception(e);
+  run_tasks(rb.members, rb.threads,
+            [&](std::int64_t member) { train_member(rb, shape, member, trained.data() + member * offset); });
   return trained;
 }
 

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <cmath>
 #include <exception>
+#include <functional>
 #include <thread>
 #include <vector>
 
@@ -111,14 +112,13 @@ void train_curve(const TrainingBatch& tb, const SmootherOptions& options, std::i
 
 }  // namespace
 
-TrainingOutput train_native(const TrainingBatch& tb, const SmootherOptions& options) {
-  CheckpointSelector selector(tb, options);  // writes only curve c's slots for curve c
-  const std::int64_t threads = std::max<std::int64_t>(1, std::min<std::int64_t>(options.curve_threads, tb.curves));
+void run_tasks(std::int64_t tasks, std::int64_t threads, const std::function<void(std::int64_t)>& task) {
+  threads = std::max<std::int64_t>(1, std::min(threads, tasks));
   std::atomic<std::int64_t> next{0};
   std::vector<std::exception_ptr> errors(static_cast<std::size_t>(threads));  // one thread: the caller's alone
   const auto work = [&](std::size_t worker) {
     try {
-      for (std::int64_t c; (c = next++) < tb.curves;) train_curve(tb, options, c, &selector);
+      for (std::int64_t t; (t = next++) < tasks;) task(t);
     } catch (...) {
       errors[worker] = std::current_exception();
     }
@@ -129,6 +129,11 @@ TrainingOutput train_native(const TrainingBatch& tb, const SmootherOptions& opti
   for (auto& t : pool) t.join();
   for (const auto& e : errors)
     if (e) std::rethrow_exception(e);
+}
+
+TrainingOutput train_native(const TrainingBatch& tb, const SmootherOptions& options) {
+  CheckpointSelector selector(tb, options);  // writes only curve c's slots for curve c
+  run_tasks(tb.curves, options.curve_threads, [&](std::int64_t c) { train_curve(tb, options, c, &selector); });
   return selector.result();
 }
 
