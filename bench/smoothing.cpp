@@ -3,7 +3,6 @@
 // objective 1 and 2 (ten runs batched; one run, its channels on one or two threads), reading a lab
 // curve. `bench_smoothing --comparison` prints instead the table of smoothers against the synthetic
 // truth (docs/smoothing.md).
-#include "demcal/smoothing/regression_ensemble.hpp"
 #include "demcal/smoothing/smoothing.hpp"
 #include "demcal/surrogate/curve_ensemble.hpp"
 
@@ -76,48 +75,23 @@ void BM_Objective2OneRun(benchmark::State& state) {
 }
 BENCHMARK(BM_Objective2OneRun)->Arg(1)->Arg(2)->ArgName("curve_threads")->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
 
-// The surrogate's curve ensemble training (regression_ensemble.hpp) at the `mlp` kind's defaults:
-// five members, 2 x 32 tanh, 82 outputs (two channels of 41 grid points), a full fit of 2000 epochs
-// on `rows` runs of `inputs` parameters; each backend.
-RegressionBatch regression_batch(std::int64_t rows, std::int64_t inputs, RegressionBackend backend) {
-  const demcal::surrogate::MlpOptions defaults;
-  RegressionBatch b;
-  b.members = defaults.members;
-  b.rows = rows;
-  b.inputs = inputs;
-  b.outputs = 82;
-  b.hidden_layers = defaults.hidden_layers;
-  b.hidden_width = defaults.hidden_width;
-  b.epochs = defaults.epochs;
-  b.learning_rate = defaults.learning_rate;
-  b.final_learning_rate = defaults.final_learning_rate;
-  b.weight_decay = defaults.weight_decay;
-  b.backend = backend;
-  std::uint64_t state = 12345;
-  const auto next = [&] {
-    state = state * 6364136223846793005ULL + 1442695040888963407ULL;
-    return static_cast<float>((state >> 40) * (1.0 / 16777216.0));
-  };
-  for (std::int64_t i = 0; i < rows; ++i) {
-    float s = 0;
-    for (std::int64_t k = 0; k < inputs; ++k) {
-      b.x.push_back(2 * next() - 1);
-      s += b.x.back();
-    }
-    for (std::int64_t k = 0; k < b.outputs; ++k) b.y.push_back(std::tanh(s * static_cast<float>(k + 1) / 40));
-  }
-  for (std::int64_t m = 0; m < b.members * rows; ++m) b.row_weight.push_back(std::floor(2 * next()));
-  const std::int64_t count = regression_parameter_count(inputs, b.outputs, b.hidden_layers, b.hidden_width);
-  for (std::int64_t q = 0; q < b.members * count; ++q) b.initial_parameters.push_back(0.3f * (2 * next() - 1));
-  return b;
-}
-
+// The surrogate's curve ensemble (surrogate/curve_ensemble.hpp) at the `mlp` kind's defaults: a full
+// fit of five members, 2 x 32 tanh, on `rows` runs of `inputs` parameters with 82 outputs (two
+// channels of 41 grid points); each training backend, its members on one or two threads.
 void BM_RegressionEnsemble(benchmark::State& state) {
-  const RegressionBackend backend = state.range(2) ? RegressionBackend::libtorch : RegressionBackend::native;
-  RegressionBatch b = regression_batch(state.range(0), state.range(1), backend);
-  b.threads = static_cast<int>(state.range(3));
-  for (auto _ : state) benchmark::DoNotOptimize(train_regression_ensemble(b));
-  state.SetLabel(to_string(backend));
+  const Eigen::Index rows = state.range(0), inputs = state.range(1), outputs = 82;
+  demcal::surrogate::MlpOptions options;
+  options.backend = state.range(2) ? RegressionBackend::libtorch : RegressionBackend::native;
+  options.threads = static_cast<int>(state.range(3));
+  const Eigen::MatrixXd X = (Eigen::MatrixXd::Random(rows, inputs).array() + 1) / 2;  // Eigen's fixed-seed generator
+  Eigen::MatrixXd Y(rows, outputs);
+  for (Eigen::Index i = 0; i < rows; ++i)
+    for (Eigen::Index k = 0; k < outputs; ++k) Y(i, k) = std::tanh(X.row(i).sum() * static_cast<double>(k + 1) / 40);
+  for (auto _ : state) {
+    demcal::surrogate::CurveEnsemble ensemble;
+    benchmark::DoNotOptimize(ensemble.fit(X, Y, options));
+  }
+  state.SetLabel(to_string(options.backend));
 }
 BENCHMARK(BM_RegressionEnsemble)->ArgsProduct({{40, 160}, {3, 9}, {0, 1}, {1, 2}})
     ->ArgNames({"rows", "inputs", "libtorch", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
