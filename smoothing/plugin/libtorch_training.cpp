@@ -152,9 +152,7 @@ std::vector<float> train_regression(const RegressionBatch& rb) {
       h = l + 1 < layers ? z.tanh_() : z;
     }
     const torch::Tensor g = backpropagate((h - target).mul_(scale), activation, weight_t, grads, members);
-    const double progress = rb.epochs > 1 ? static_cast<double>(epoch) / (rb.epochs - 1) : 1.0;
-    const double lr = rb.final_learning_rate +
-                      0.5 * (rb.learning_rate - rb.final_learning_rate) * (1 + std::cos(M_PI * progress));
+    const double lr = cosine_learning_rate(rb.learning_rate, rb.final_learning_rate, rb.epochs, epoch);
     const double t = epoch + 1;
     const torch::Tensor denom = adam_moments(adam_m, adam_v, g, t);
     params.mul_(1 - lr * rb.weight_decay).addcdiv_(adam_m, denom, -lr / (1 - std::pow(kAdamBeta1, t)));

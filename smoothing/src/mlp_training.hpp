@@ -61,6 +61,8 @@ class CheckpointSelector {
 inline constexpr double kAdamBeta1 = 0.9;
 inline constexpr double kAdamBeta2 = 0.999;
 inline constexpr double kAdamEpsilon = 1e-8;
+// The step at `epoch` (from 0) of `epochs`: `first` decayed to `last` by a cosine.
+double cosine_learning_rate(double first, double last, int epochs, int epoch);
 double learning_rate_at(const SmootherOptions& options, int epoch);
 
 // Rational approximation of tanh (the coefficients of Eigen's generic_fast_tanh_float), accurate to

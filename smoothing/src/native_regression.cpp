@@ -11,14 +11,10 @@ namespace demcal::smoothing::detail {
 
 namespace {
 
-struct Layer {
-  std::int64_t in, out, weight_offset, bias_offset;
-};
-
 // One member: `parameters` (its slice of the result, holding its initial parameters on entry) is
 // trained in place.
 __attribute__((target_clones("arch=x86-64-v3", "default")))
-void train_member(const RegressionBatch& rb, const std::vector<Layer>& shape, std::int64_t member, float* parameters) {
+void train_member(const RegressionBatch& rb, const std::vector<LayerShape>& shape, std::int64_t member, float* parameters) {
   const std::int64_t n = rb.rows, total = shape.back().bias_offset + shape.back().out;
   const std::size_t layers = shape.size();
   float* p = parameters;
@@ -43,7 +39,7 @@ void train_member(const RegressionBatch& rb, const std::vector<Layer>& shape, st
 
   for (int epoch = 0; epoch < rb.epochs; ++epoch) {
     for (std::size_t l = 0; l < layers; ++l) {
-      const Layer& s = shape[l];
+      const LayerShape& s = shape[l];
       float* z = activation[l + 1].data();
       for (std::int64_t k = 0; k < n; ++k)
         for (std::int64_t j = 0; j < s.out; ++j) z[k * s.out + j] = p[s.bias_offset + j];
@@ -58,7 +54,7 @@ void train_member(const RegressionBatch& rb, const std::vector<Layer>& shape, st
         delta[static_cast<std::size_t>(k * rb.outputs + j)] =
             (output[k * rb.outputs + j] - target[k * rb.outputs + j]) * row_scale[static_cast<std::size_t>(k)];
     for (std::size_t l = layers; l-- > 0;) {
-      const Layer& s = shape[l];
+      const LayerShape& s = shape[l];
       float* gW = g.data() + s.weight_offset;
       float* gb = g.data() + s.bias_offset;
       const float* h = activation[l].data();
@@ -77,8 +73,7 @@ void train_member(const RegressionBatch& rb, const std::vector<Layer>& shape, st
       for (std::int64_t q = 0; q < n * s.in; ++q) previous_delta[static_cast<std::size_t>(q)] *= 1.0f - h[q] * h[q];
       std::swap(delta, previous_delta);
     }
-    const double progress = rb.epochs > 1 ? static_cast<double>(epoch) / (rb.epochs - 1) : 1.0;
-    const double lr = rb.final_learning_rate + 0.5 * (rb.learning_rate - rb.final_learning_rate) * (1 + std::cos(M_PI * progress));
+    const double lr = cosine_learning_rate(rb.learning_rate, rb.final_learning_rate, rb.epochs, epoch);
     const double t = epoch + 1;
     const float decay = static_cast<float>(1 - lr * rb.weight_decay);
     const float step = static_cast<float>(lr / (1 - std::pow(kAdamBeta1, t)));
@@ -97,7 +92,7 @@ void train_member(const RegressionBatch& rb, const std::vector<Layer>& shape, st
 }  // namespace
 
 std::vector<float> train_regression_native(const RegressionBatch& rb) {
-  std::vector<Layer> shape;
+  std::vector<LayerShape> shape;
   std::int64_t offset = 0, in = rb.inputs;
   for (int l = 0; l <= rb.hidden_layers; ++l) {
     const std::int64_t out = l < rb.hidden_layers ? rb.hidden_width : rb.outputs;

@@ -30,9 +30,13 @@ RegressionBackend parse_regression_backend(const std::string& name) {
 
 namespace detail {
 
+double cosine_learning_rate(double first, double last, int epochs, int epoch) {
+  const double progress = epochs > 1 ? static_cast<double>(epoch) / (epochs - 1) : 1.0;
+  return last + 0.5 * (first - last) * (1 + std::cos(M_PI * progress));
+}
+
 double learning_rate_at(const SmootherOptions& o, int epoch) {
-  const double progress = o.epochs > 1 ? static_cast<double>(epoch) / (o.epochs - 1) : 1.0;
-  return o.final_learning_rate + 0.5 * (o.learning_rate - o.final_learning_rate) * (1 + std::cos(M_PI * progress));
+  return cosine_learning_rate(o.learning_rate, o.final_learning_rate, o.epochs, epoch);
 }
 
 CheckpointSelector::CheckpointSelector(const TrainingBatch& batch, const SmootherOptions& o)
