@@ -109,8 +109,9 @@ def number(v):
 def effect_parameters(d, declared, truth):
     """Each parameter of the chosen effects: value, range (the bounds' check), truth, inside or not.
     An effect added at a further step is read from that step's diagnosis.json, at the value of the
-    fit with every effect (the last step's), its range that of its entry in "added" (of its step, or
-    for one added tentatively, of the model with every effect)."""
+    fit with every effect (the last step's, or the pair search's where two were found together), its
+    range that of its entry in "added" (of its step, or for one added tentatively or in a pair, of the
+    model with every effect)."""
     steps = {}
     for a in d.get("added", []):
         if a["folder"]:
@@ -119,7 +120,9 @@ def effect_parameters(d, declared, truth):
         else:
             steps[a["effect"]] = d
     final = {}
-    if steps:
+    if (d.get("pair_search") or {}).get("accepted"):  # two effects found together: the pair's fit
+        final = d["pair_search"]["params"]
+    elif steps:
         last = steps[d["added"][-1]["effect"]]
         final = next(c["params"] for c in last["candidates"] if c["effect"] == d["added"][-1]["effect"])
     added_bounds = {a["effect"]: a.get("bounds", {}) for a in d.get("added", [])}

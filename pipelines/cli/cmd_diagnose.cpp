@@ -89,6 +89,11 @@ void setup(CLI::App& app) {
                   "the base and every candidate's parameters, each round simulating its best point for each "
                   "candidate (0 = none)")
       ->capture_default_str();
+  sub->add_option("--pair-rounds", o.pair_rounds,
+                  "Rounds of the pair search where no effect passes alone and the base misses the curves: the "
+                  "union search's emulator searched for every pair of candidates with both switched on, each round "
+                  "simulating its best point for each pair (0 = none)")
+      ->capture_default_str();
   sub->add_option("--candidate-starts", o.candidate_starts,
                   "Points of each candidate's search design that start from a base fit: the best, then the best "
                   "base sets of other regions")

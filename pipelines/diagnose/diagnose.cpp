@@ -49,6 +49,9 @@ void DiagnoseOptions::Validate() const {
   at_least("--union-rounds", union_rounds, 0, " (0: none)");
   if (auto m = limits::check(limits::Limit::evaluations, static_cast<double>(union_rounds)))
     fail("--union-rounds", std::to_string(union_rounds), *m);
+  at_least("--pair-rounds", pair_rounds, 0, " (0: none)");
+  if (auto m = limits::check(limits::Limit::evaluations, static_cast<double>(pair_rounds)))
+    fail("--pair-rounds", std::to_string(pair_rounds), *m);
   at_least("--max-effects", max_effects, 0, " (0: no limit)");
   at_least("--resamples", resamples, 0);
   if (resamples > kMaxResamples) fail("--resamples", std::to_string(resamples), "must be <= " + std::to_string(kMaxResamples));
@@ -213,6 +216,16 @@ json UnionSearch::to_json() const {
           {"error_before", finite_or_null(error_before)}, {"error_found", finite_or_null(error_found)}, {"kept", kept}};
 }
 
+json PairSearch::to_json() const {
+  json tried = json::array();
+  for (const auto& p : pairs)
+    tried.push_back({{"effects", p.effects}, {"best_run_error", finite_or_null(p.best_run_error)},
+                     {"error", finite_or_null(p.error)}, {"criterion", finite_or_null(p.criterion)}});
+  return {{"rounds", rounds}, {"simulations", simulations}, {"pairs", tried}, {"effects", effects},
+          {"params", params_json(params)}, {"rerun_errors", rerun_errors}, {"error", finite_or_null(error)},
+          {"criterion", finite_or_null(criterion)}, {"frequency", finite_or_null(frequency)}, {"accepted", accepted}};
+}
+
 json Diagnosis::to_json() const {
   json base = {{"params", params_json(base_params)}, {"fitness", finite_or_null(base_fitness)}, {"rms", params_json(base_rms)},
                {"rerun_errors", base_rerun_errors}};
@@ -280,6 +293,7 @@ json Diagnosis::to_json() const {
           {"outcome", to_string(outcome)},
           {"added", added_json},
           {"removal_checks", removals},
+          {"pair_search", pair_search.rounds > 0 ? pair_search.to_json() : json()},
           {"headline", headline},
           {"conclusion", conclusion},
           {"notes", notes},

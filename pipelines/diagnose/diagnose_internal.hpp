@@ -292,6 +292,21 @@ void calibrate_candidates(DiagnosisRun& run);          // 4. extension.cpp
 // best proposal, judged on the median of its re-runs, replaces the calibration's fit when its error
 // is lower (EffectCandidate::union_search).
 void search_union(DiagnosisRun& run);
+// 8a. The pair search (DiagnoseOptions::pair_rounds; union_search.cpp), where no effect passes
+// alone: the union search's emulator searched for every pair of calibrated candidates with both
+// switched on, the best point of each pair simulated per round (into run.d.pair_search); the pairs
+// whose best run beats both of their effects' fits (at most three, lowest first) judged on the
+// median of their best set's runs.
+struct PairFit {
+  std::size_t pair = 0;                    // its entry of PairSearch::pairs
+  const EffectCandidate* first = nullptr;  // the candidates of its two effects, in the candidates' order
+  const EffectCandidate* second = nullptr;
+  ExtendedModel model;                     // the base model with both effects
+  std::map<std::string, double> set;       // its best set, complete
+  EffectCandidate fit;                     // judge_fit's fields; effect and target the second's,
+                                           // effect_parameters both effects'
+};
+std::vector<PairFit> search_pairs(DiagnosisRun& run);
 void select_and_search_further(DiagnosisRun& run);     // 5. selection.cpp
 void resample_verdict(DiagnosisRun& run);              // 5c. resampling.cpp
 void bound_accepted_parameters(DiagnosisRun& run);     // 6. ranges.cpp

@@ -154,17 +154,14 @@ void settle_on_base_alone(Diagnosis& d, const DiagnosisRun& run, const std::stri
                " N against " + format_number(run.noise, 3) + " N of noise.";
 }
 
-// The removal check of the effects added (Diagnosis::removal_checks): each left out in turn, the
-// model with the others (the first alone: the base) calibrated again from the fit with all of them;
-// the one whose removal costs least is dropped when it costs no evidence, and the verdict says so
-// with the error without it. One pass: a dropped effect's partners are not checked again.
-void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& steps) {
+// The removal check of the effects added (Diagnosis::removal_checks): each of `effects` left out in
+// turn, the model with the others (the first alone: the base) calibrated again from the fit with all
+// of them (`full`, its residuals `with_all`); the one whose removal costs least is dropped when it
+// costs no evidence, and the verdict says so with the error without it (after `errors`, the errors
+// of the steps before: "492 → 331 → 133"). One pass: a dropped effect's partners are not checked again.
+void check_removals(DiagnosisRun& run, const std::vector<ModelEffect>& effects, const std::map<std::string, double>& full,
+                    const std::vector<ChannelResidual>& with_all, const std::string& errors) {
   Diagnosis& d = run.d;
-  std::vector<ModelEffect> effects;
-  for (const auto* step : steps) effects.push_back(model_effect(step->d));
-  const DiagnosisRun& last = *steps.back();
-  const std::vector<ChannelResidual>& with_all = effects.back().fit->residuals;
-  const auto& full = last.best_sets.at(effects.back().fit->effect);
   std::vector<EffectCandidate> without(effects.size());
   std::vector<std::map<std::string, double>> sets(effects.size());
   std::vector<fs::path> folders;
@@ -205,8 +202,6 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
   std::erase(d.chosen, dropped.effect);
   std::vector<ModelEffect> kept = effects;
   kept.erase(kept.begin() + drop);
-  std::string errors = format_number(d.error_before, 3);
-  for (const auto& a : d.added) errors += " → " + format_number(a.error_after, 3);
   d.error_after = without[k].error;
   const std::string why = dropped.effect + " dropped again (its removal costs no evidence: criterion " +
                           format_number(criteria[k], 3) + ")";
@@ -220,6 +215,127 @@ void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& s
   }
   add_note(d, " Removal check: " + why + "; the model without it, in " + dropped.folder + ", fits to " +
                   format_number(d.error_after, 3) + " N.");
+}
+
+// The same for the steps of several effects added one after another (the first step's run first).
+void check_removals(DiagnosisRun& run, const std::vector<const DiagnosisRun*>& steps) {
+  std::vector<ModelEffect> effects;
+  for (const auto* step : steps) effects.push_back(model_effect(step->d));
+  std::string errors = format_number(run.d.error_before, 3);
+  for (const auto& a : run.d.added) errors += " → " + format_number(a.error_after, 3);
+  check_removals(run, effects, steps.back()->best_sets.at(effects.back().fit->effect), effects.back().fit->residuals,
+                 errors);
+}
+
+// Step 8a, where no effect passes alone and the base misses the curves: the pair search
+// (search_pairs); where its pair of lowest criterion passes against the base (both effects'
+// parameters counted, the effective points of every fit, reached by --verdict-share of the
+// resamples), both effects are added at its fit, each bounded in the model with both, and the removal
+// check re-fits each without the other. True when a pair was added.
+bool add_pair(DiagnosisRun& run) {
+  Diagnosis& d = run.d;
+  const DiagnoseOptions& o = run.options;
+  if (o.pair_rounds <= 0 || !o.removal_check || o.max_effects == 1 || d.outcome != DiagnosisOutcome::unexplained)
+    return false;
+  progress(o, "no effect passes alone: every pair of the candidates searched together");
+  std::vector<PairFit> fits = search_pairs(run);
+  PairSearch& report = d.pair_search;
+  if (report.rounds == 0) return false;
+  const std::string searched = " Pairs of effects searched together (" + std::to_string(report.pairs.size()) +
+                               (report.pairs.size() == 1 ? " pair, " : " pairs, ") + std::to_string(report.rounds) +
+                               " rounds, " + std::to_string(report.simulations) + " simulations): ";
+  std::vector<const std::vector<ChannelResidual>*> all = {&d.base_residuals};
+  for (const auto& c : d.candidates)
+    if (c.tried && c.residuals.size() == d.base_residuals.size()) all.push_back(&c.residuals);
+  for (const auto& f : fits)
+    if (f.fit.residuals.size() == d.base_residuals.size()) all.push_back(&f.fit.residuals);
+  const std::vector<double> points = common_effective_points(all);
+  PairFit* best = nullptr;
+  for (auto& f : fits) {
+    if (f.fit.residuals.size() != d.base_residuals.size()) continue;
+    f.fit.score = information_criterion_change(d.base_residuals, f.fit.residuals, f.fit.effect_parameters, points);
+    report.pairs[f.pair].error = f.fit.error;
+    report.pairs[f.pair].criterion = f.fit.score;
+    if (!(f.fit.error < d.error_before) || check_held_out(f.fit, d, o).spoils) continue;
+    if (best == nullptr || f.fit.score < best->fit.score) best = &f;
+  }
+  if (best == nullptr) {
+    const auto closest = std::min_element(report.pairs.begin(), report.pairs.end(), [](const auto& a, const auto& b) {
+      return !(b.best_run_error <= a.best_run_error);  // NaN last
+    });
+    add_note(d, searched + (fits.empty() ? "no pair's best run fitted better than both of its effects alone (the closest, " +
+                                               closest->effects[0] + " and " + closest->effects[1] + ", " +
+                                               format_number(closest->best_run_error, 3) + " N)."
+                                         : "no pair's fit lowered the error without spoiling the held-out data."));
+    return false;
+  }
+  const std::string pair_text = best->first->effect + " and " + best->second->effect;
+  report.effects = {best->first->effect, best->second->effect};
+  report.params = best->set;
+  report.rerun_errors = best->fit.rerun_errors;
+  report.error = best->fit.error;
+  report.criterion = best->fit.score;
+  std::vector<std::vector<ChannelResidual>> base_runs;
+  for (const auto& e : run.base_runs) base_runs.push_back(e.residuals);
+  report.frequency = pair_frequency(base_runs, best->fit.run_residuals, best->fit.effect_parameters, points, o.evidence,
+                                    o.resamples, static_cast<std::uint64_t>(run.config.optimiser.seed));
+  // without resamples (--resamples 0) the criterion decides alone
+  report.accepted = best->fit.score < -o.evidence && !(report.frequency < o.verdict_share);
+  const std::string found = pair_text + " together fit to " + format_number(best->fit.error, 3) + " N (" +
+                            best->first->effect + " alone " + format_number(best->first->error, 3) + " N, " +
+                            best->second->effect + " alone " + format_number(best->second->error, 3) +
+                            " N), criterion " + format_number(best->fit.score, 3) + " against the base" +
+                            (std::isfinite(report.frequency) ? ", passing in " + percent(report.frequency) + " of " +
+                                                                   std::to_string(o.resamples) + " resamples"
+                                                             : "");
+  if (!report.accepted) {
+    add_note(d, searched + "the closest pair, " + found + ": short of passing.");
+    return false;
+  }
+  // each effect at the pair's fit, bounded in the model with both (the others re-fitted)
+  std::vector<EffectCandidate> members = {*best->first, *best->second};
+  const dem::ResponseScales scales{std::isfinite(d.peak_normal_stress) ? d.peak_normal_stress : 0,
+                                   std::isfinite(d.start_normal_stress) ? d.start_normal_stress : 0};
+  std::vector<ModelEffect> effects;
+  for (auto& m : members) {
+    m.params = best->set;
+    m.residuals = best->fit.residuals;
+    m.error = best->fit.error;
+    m.bounds.clear();
+    if (o.parameter_bounds) {
+      ExtendedModel model = best->model;
+      const ExtendedModel& own = run.models.at(m.effect);
+      model.parameter_names = own.parameter_names;
+      model.parameters = own.parameters;
+      progress(o, "checking how tightly the data pin the parameters of " + m.effect + " in the model with " + pair_text);
+      bound_effect_parameters(m, model, best->set, run.base.residuals, points, run.runner, o);
+    }
+  }
+  for (const auto& m : members) {
+    ModelEffect e;
+    e.effect = &dem::find_effect(m.effect);
+    if (!m.target.empty()) e.targets = {m.target};
+    e.scales = scales;
+    e.fit = &m;
+    effects.push_back(e);
+  }
+  d.added.clear();
+  for (const auto& m : members)
+    d.added.push_back({m.effect, m.target, fitted_effect_parameters(m, d), d.error_before, best->fit.error, "",
+                       report.frequency, false, m.bounds});
+  d.chosen = report.effects;
+  d.outcome = DiagnosisOutcome::missing_effect;
+  d.error_after = best->fit.error;
+  const std::string errors = format_number(d.error_before, 3) + " → " + format_number(d.error_after, 3);
+  d.headline = "Missing 2 effects, found together: " + effects_text(effects, best->set, d) + "; force error " + errors +
+               " N against " + format_number(run.noise, 3) + " N of noise; neither passed alone" +
+               (std::isfinite(report.frequency) ? "; the pair passes in " + percent(report.frequency) + " of " +
+                                                      std::to_string(o.resamples) + " resamples"
+                                                : "") +
+               ".";
+  add_note(d, searched + found + ": both added.");
+  check_removals(run, effects, best->set, best->fit.residuals, errors);
+  return true;
 }
 
 }  // namespace
@@ -261,6 +377,7 @@ void add_further_effects(DiagnosisRun& run) {
   const EffectCandidate* adding = chosen_candidate(d);
   const bool tentative = adding == nullptr;
   if (tentative) {
+    if (add_pair(run)) return;
     const std::string name = tentative_effect(d, run.options);
     if (name.empty() || !run.models.count(name) || !run.best_sets.count(name)) return;
     adding = &*std::find_if(d.candidates.begin(), d.candidates.end(), [&](const auto& c) { return c.effect == name; });

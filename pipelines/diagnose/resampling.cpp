@@ -117,6 +117,31 @@ Diagnosis::VerdictFrequency verdict_frequency(const Diagnosis& diagnosis, const 
   return f;
 }
 
+double pair_frequency(const std::vector<std::vector<ChannelResidual>>& base_runs,
+                      const std::vector<std::vector<ChannelResidual>>& pair_runs, int parameters,
+                      const std::vector<double>& effective_points, double evidence, int resamples,
+                      std::uint64_t seed) {
+  if (resamples <= 0 || base_runs.empty() || pair_runs.empty() || effective_points.size() != base_runs.front().size())
+    return Diagnosis::kNaN;
+  std::mt19937_64 random(seed);
+  const auto pick = [&](std::size_t runs) { return std::uniform_int_distribution<std::size_t>(0, runs - 1)(random); };
+  long passed = 0;
+  for (int r = 0; r < resamples; ++r) {
+    std::vector<std::vector<std::size_t>> indices;
+    for (std::size_t c = 0; c < effective_points.size(); ++c) {
+      const std::size_t n = base_runs.front()[c].measured.size();
+      const double points = std::max(1.0, effective_points[c]);
+      indices.push_back(block_resample(n, static_cast<std::size_t>(std::lround(static_cast<double>(n) / points)), random));
+    }
+    std::vector<ChannelResidual> base = base_runs[pick(base_runs.size())];
+    std::vector<ChannelResidual> pair = pair_runs[pick(pair_runs.size())];
+    if (!resampled(base, indices) || !resampled(pair, indices)) continue;
+    const double change = information_criterion_change(base, pair, parameters, effective_points);
+    if (change < -evidence && overall_error(pair) < overall_error(base)) ++passed;
+  }
+  return static_cast<double>(passed) / resamples;
+}
+
 bool settle_on_frequency(Diagnosis& d, const DiagnoseOptions& options) {
   const auto& f = d.frequency;
   if (f.resamples == 0 || d.outcome == DiagnosisOutcome::undecided || !(f.verdict < options.verdict_share)) return false;

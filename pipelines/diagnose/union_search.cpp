@@ -62,8 +62,23 @@ const optimise::ParameterSpec& spec_of(const optimise::ParameterSpace& space, co
 
 }  // namespace
 
+namespace {
+
+std::vector<int> models_on(int model) { return model < 0 ? std::vector<int>{} : std::vector<int>{model}; }
+
+}  // namespace
+
 Eigen::VectorXd UnionLayout::point(int model, const std::map<std::string, double>& params) const {
-  Eigen::VectorXd x = switched(-1, Eigen::VectorXd::Constant(dimension_, 0.5));
+  return point(models_on(model), params);
+}
+Eigen::VectorXd UnionLayout::switched(int model, Eigen::VectorXd x) const { return switched(models_on(model), std::move(x)); }
+std::vector<Eigen::Index> UnionLayout::coordinates(int model) const { return coordinates(models_on(model)); }
+std::map<std::string, double> UnionLayout::parameters(int model, const Eigen::VectorXd& x) const {
+  return parameters(models_on(model), x);
+}
+
+Eigen::VectorXd UnionLayout::point(const std::vector<int>& on, const std::map<std::string, double>& params) const {
+  Eigen::VectorXd x = switched(on, Eigen::VectorXd::Constant(dimension_, 0.5));
   const auto value = [&](const std::string& name) {
     const auto it = params.find(name);
     return it == params.end() ? std::numeric_limits<double>::quiet_NaN() : it->second;
@@ -73,47 +88,53 @@ Eigen::VectorXd UnionLayout::point(int model, const std::map<std::string, double
     x(static_cast<Eigen::Index>(k)) = unit_of(base[k], value(base[k].name));
     if (std::isnan(x(static_cast<Eigen::Index>(k)))) return {};
   }
-  if (model < 0) return x;
-  const Block& b = blocks_.at(static_cast<std::size_t>(model));
-  x(b.offset) = 1;
-  for (std::size_t k = 0; k < b.own.size(); ++k) {
-    const Eigen::Index at = b.offset + 1 + static_cast<Eigen::Index>(k);
-    x(at) = unit_of(spec_of(b.space, b.own[k]), value(b.own[k]));
-    if (std::isnan(x(at))) return {};
+  for (const int model : on) {
+    const Block& b = blocks_.at(static_cast<std::size_t>(model));
+    for (std::size_t k = 0; k < b.own.size(); ++k) {
+      const Eigen::Index at = b.offset + 1 + static_cast<Eigen::Index>(k);
+      x(at) = unit_of(spec_of(b.space, b.own[k]), value(b.own[k]));
+      if (std::isnan(x(at))) return {};
+    }
   }
   return x;
 }
 
-Eigen::VectorXd UnionLayout::switched(int model, Eigen::VectorXd x) const {
+Eigen::VectorXd UnionLayout::switched(const std::vector<int>& on, Eigen::VectorXd x) const {
   for (int m = 0; m < models(); ++m) {
     const Block& b = blocks_[static_cast<std::size_t>(m)];
-    x(b.offset) = m == model ? 1.0 : 0.0;
-    if (m != model) x.segment(b.offset + 1, static_cast<Eigen::Index>(b.own.size())).setConstant(0.5);
+    const bool is_on = std::find(on.begin(), on.end(), m) != on.end();
+    x(b.offset) = is_on ? 1.0 : 0.0;
+    if (!is_on) x.segment(b.offset + 1, static_cast<Eigen::Index>(b.own.size())).setConstant(0.5);
   }
   return x;
 }
 
-std::vector<Eigen::Index> UnionLayout::coordinates(int model) const {
+std::vector<Eigen::Index> UnionLayout::coordinates(const std::vector<int>& on) const {
   std::vector<Eigen::Index> c;
   for (Eigen::Index k = 0; k < base_.dimension(); ++k) c.push_back(k);
-  if (model < 0) return c;
-  const Block& b = blocks_.at(static_cast<std::size_t>(model));
-  for (std::size_t k = 0; k < b.own.size(); ++k) c.push_back(b.offset + 1 + static_cast<Eigen::Index>(k));
+  for (const int model : on) {
+    const Block& b = blocks_.at(static_cast<std::size_t>(model));
+    for (std::size_t k = 0; k < b.own.size(); ++k) c.push_back(b.offset + 1 + static_cast<Eigen::Index>(k));
+  }
   return c;
 }
 
-std::map<std::string, double> UnionLayout::parameters(int model, const Eigen::VectorXd& x) const {
+std::map<std::string, double> UnionLayout::parameters(const std::vector<int>& on, const Eigen::VectorXd& x) const {
   std::map<std::string, double> params;
-  const optimise::ParameterSpace& own_space = model < 0 ? base_ : blocks_.at(static_cast<std::size_t>(model)).space;
   const auto& base = base_.free_parameters();
   for (std::size_t k = 0; k < base.size(); ++k) {
-    const optimise::ParameterSpec& box = spec_of(own_space, base[k].name);  // a model's box may be narrower
-    params[base[k].name] = std::clamp(physical_of(base[k], x(static_cast<Eigen::Index>(k))), box.lower, box.upper);
+    double v = physical_of(base[k], x(static_cast<Eigen::Index>(k)));
+    for (const int model : on) {  // a model's box may be narrower
+      const optimise::ParameterSpec& box = spec_of(blocks_.at(static_cast<std::size_t>(model)).space, base[k].name);
+      v = std::clamp(v, box.lower, box.upper);
+    }
+    params[base[k].name] = v;
   }
-  if (model < 0) return params;
-  const Block& b = blocks_.at(static_cast<std::size_t>(model));
-  for (std::size_t k = 0; k < b.own.size(); ++k)
-    params[b.own[k]] = physical_of(spec_of(b.space, b.own[k]), x(b.offset + 1 + static_cast<Eigen::Index>(k)));
+  for (const int model : on) {
+    const Block& b = blocks_.at(static_cast<std::size_t>(model));
+    for (std::size_t k = 0; k < b.own.size(); ++k)
+      params[b.own[k]] = physical_of(spec_of(b.space, b.own[k]), x(b.offset + 1 + static_cast<Eigen::Index>(k)));
+  }
   return params;
 }
 
@@ -144,7 +165,7 @@ struct Row {
   Eigen::VectorXd x;
   Eigen::VectorXd outputs;
   double fitness = 0;  // curve_fitness of the outputs: what the emulator's predictions are compared with
-  int model = -1;
+  std::vector<int> on;  // the models switched on (UnionLayout's indices; none: the base)
 };
 
 std::vector<ArchivedCase> archived_cases(const CampaignConfig& fitted, const std::vector<CaseCurveGrid>& grids) {
@@ -216,21 +237,21 @@ void compass_search(const Emulator& emulator, const std::vector<Eigen::Index>& c
   }
 }
 
-// Where the emulator puts model `model`'s best point: random points over its coordinates and
+// Where the emulator puts the best point of the models `on` switched on together: random points over its coordinates and
 // `starts` scored, the best kLocalStarts refined; the best refined point at least kSeparation from
 // every point of `taken` (its runs and proposals so far). Empty when every refined point is taken.
-Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, int model,
+Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, const std::vector<int>& on,
                         const std::vector<Eigen::VectorXd>& starts, const std::vector<Eigen::VectorXd>& taken,
                         std::mt19937_64& rng, double& predicted) {
-  const std::vector<Eigen::Index> coordinates = layout.coordinates(model);
+  const std::vector<Eigen::Index> coordinates = layout.coordinates(on);
   std::vector<std::pair<double, Eigen::VectorXd>> scored;
   for (const auto& s : starts) {
-    const Eigen::VectorXd x = layout.switched(model, s);
+    const Eigen::VectorXd x = layout.switched(on, s);
     scored.emplace_back(emulator.fitness(x), x);
   }
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   for (int i = 0; i < kRandomPoints; ++i) {
-    Eigen::VectorXd x = layout.switched(model, starts.front());
+    Eigen::VectorXd x = layout.switched(on, starts.front());
     for (const Eigen::Index k : coordinates) x(k) = unit(rng);
     scored.emplace_back(emulator.fitness(x), x);
   }
@@ -264,45 +285,86 @@ Eigen::VectorXd fitted_outputs(const Evaluation& e, const CampaignConfig& fitted
   return run_outputs(runs, cases);
 }
 
-}  // namespace
+// The models of the union (the base and every calibrated candidate's), its layout, its rows (every
+// archived run of those models on this step's objective grid) and its emulator.
+struct Union {
+  explicit Union(DiagnosisRun& run);
 
-void search_union(DiagnosisRun& run) {
-  const DiagnoseOptions& options = run.options;
+  CampaignConfig base_fitted;
+  std::vector<CaseCurveGrid> case_grids;
+  std::vector<std::shared_ptr<const CurveGrid>> grids;
+  UnionLayout layout;
+  std::vector<UnionModel> models;  // the base first
+  std::vector<Row> rows;
+  Emulator emulator;
+  std::mt19937_64 rng;
   double model_s = 0;  // the emulator's fits and searches
-  const auto model_time = [&](auto&& work) {
+
+  // `work` timed as model time.
+  template <class Work>
+  void model_time(Work&& work) {
     const auto start = std::chrono::steady_clock::now();
     work();
     model_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  };
+  }
+  // The rows by fitness, best first.
+  std::vector<const Row*> ranked() const {
+    std::vector<const Row*> r;
+    for (const auto& row : rows) r.push_back(&row);
+    std::stable_sort(r.begin(), r.end(), [](const Row* a, const Row* b) { return a->fitness < b->fitness; });
+    return r;
+  }
+  // Starts for the models `on` switched on together, at `fit` (the combination's best set so far):
+  // `fit` and its own best runs, then the two best runs of every other model or combination with
+  // the base parameters taken from them and the rest as in `fit` (what the others found about the
+  // base parameters). Into `taken`: every run of the combination.
+  std::vector<Eigen::VectorXd> starts(const std::vector<int>& on, const Eigen::VectorXd& fit,
+                                      std::vector<Eigen::VectorXd>& taken) const;
+  // The row of a run of the models `on` (its fitted cases' outputs as `fitted` and `cases` read
+  // them); false when the run failed or lacks a curve.
+  bool add_row(const Evaluation& e, const Eigen::VectorXd& x, const std::vector<int>& on, const CampaignConfig& fitted,
+               const std::vector<ArchivedCase>& cases);
+};
 
-  const CampaignConfig base_fitted = fitted_cases(run.config, options);
-  const std::vector<CaseCurveGrid> grids = campaign_curve_grids(base_fitted);
-  std::vector<std::shared_ptr<const CurveGrid>> grid_pointers;
-  for (const auto& g : grids) grid_pointers.push_back(g.grid);
+std::vector<std::shared_ptr<const CurveGrid>> grid_pointers(const std::vector<CaseCurveGrid>& grids) {
+  std::vector<std::shared_ptr<const CurveGrid>> pointers;
+  for (const auto& g : grids) pointers.push_back(g.grid);
+  return pointers;
+}
 
-  UnionLayout layout(run.config.space);
-  std::vector<UnionModel> models(1);  // the base first
+surrogate::MlpOptions emulator_options(const DiagnosisRun& run) {
+  surrogate::MlpOptions mlp = run.config.surrogate.options.mlp;
+  mlp.seed = static_cast<std::uint64_t>(run.config.optimiser.seed);
+  mlp.threads = std::max(1, hardware_threads());
+  return mlp;
+}
+
+Union::Union(DiagnosisRun& run)
+    : base_fitted(fitted_cases(run.config, run.options)),
+      case_grids(campaign_curve_grids(base_fitted)),
+      grids(grid_pointers(case_grids)),
+      layout(run.config.space),
+      emulator(grids, emulator_options(run)),
+      rng(static_cast<std::uint64_t>(run.config.optimiser.seed) * 0x9e3779b97f4a7c15ULL + 7) {
+  models.resize(1);
   models.front().fitted = base_fitted;
-  models.front().cases = archived_cases(base_fitted, grids);
+  models.front().cases = archived_cases(base_fitted, case_grids);
   for (auto& c : run.d.candidates) {
     if (!c.tried || !std::isfinite(c.error) || !run.models.count(c.effect)) continue;
     UnionModel m;
     m.candidate = &c;
     m.extended = &run.models.at(c.effect);
-    m.fitted = fitted_cases(m.extended->config, options);
-    m.fitted.space = extended_space(*m.extended, run.config, run.d.base_params, options);
-    m.cases = archived_cases(m.fitted, grids);
+    m.fitted = fitted_cases(m.extended->config, run.options);
+    m.fitted.space = extended_space(*m.extended, run.config, run.d.base_params, run.options);
+    m.cases = archived_cases(m.fitted, case_grids);
     m.index = layout.add_model(m.fitted.space);
     models.push_back(std::move(m));
   }
-  if (models.size() < 2) return;
-
   // Every archived run of the models, on the grids of this step's objective: a further step's base
   // model ran in the steps before it, whose archives come first.
-  std::vector<Row> rows;
   std::set<std::pair<int, std::vector<double>>> seen;
   std::vector<std::string> archives = run.earlier_archives;
-  archives.push_back(diagnosis_archive(options));
+  archives.push_back(diagnosis_archive(run.options));
   for (const auto& path : archives) {
     if (!fs::exists(path)) continue;
     const RunArchive archive(path);
@@ -311,14 +373,47 @@ void search_union(DiagnosisRun& run) {
         if (r.outputs.size() == 0 || !std::isfinite(r.fitness)) continue;
         const Eigen::VectorXd x = layout.point(m.index, m.fitted.space.values(m.fitted.space.to_physical(r.unit)));
         if (x.size() == 0 || !seen.insert({m.index, std::vector<double>(x.data(), x.data() + x.size())}).second) continue;
-        rows.push_back({x, r.outputs, curve_fitness(r.outputs, grid_pointers), m.index});
+        rows.push_back({x, r.outputs, curve_fitness(r.outputs, grids), m.index < 0 ? std::vector<int>{} : std::vector<int>{m.index}});
       }
   }
-  surrogate::MlpOptions mlp = run.config.surrogate.options.mlp;
-  mlp.seed = static_cast<std::uint64_t>(run.config.optimiser.seed);
-  mlp.threads = std::max(1, hardware_threads());
-  Emulator emulator(grid_pointers, mlp);
-  std::mt19937_64 rng(static_cast<std::uint64_t>(run.config.optimiser.seed) * 0x9e3779b97f4a7c15ULL + 7);
+}
+
+std::vector<Eigen::VectorXd> Union::starts(const std::vector<int>& on, const Eigen::VectorXd& fit,
+                                           std::vector<Eigen::VectorXd>& taken) const {
+  const std::vector<const Row*> by_fitness = ranked();
+  std::vector<Eigen::VectorXd> s = {fit};
+  for (const Row* r : by_fitness)
+    if (r->on == on) {
+      taken.push_back(r->x);
+      if (s.size() < 4) s.push_back(r->x);
+    }
+  std::map<std::vector<int>, int> added;
+  for (const Row* r : by_fitness) {
+    if (r->on == on || added[r->on] >= 2) continue;
+    Eigen::VectorXd x = fit;
+    x.head(layout.coordinates(-1).size()) = r->x.head(layout.coordinates(-1).size());
+    s.push_back(x);
+    ++added[r->on];
+  }
+  return s;
+}
+
+bool Union::add_row(const Evaluation& e, const Eigen::VectorXd& x, const std::vector<int>& on,
+                    const CampaignConfig& fitted, const std::vector<ArchivedCase>& cases) {
+  if (!e.ok) return false;
+  const Eigen::VectorXd outputs = fitted_outputs(e, fitted, cases);
+  if (outputs.size() == 0) return false;
+  rows.push_back({x, outputs, curve_fitness(outputs, grids), on});
+  return true;
+}
+
+}  // namespace
+
+void search_union(DiagnosisRun& run) {
+  const DiagnoseOptions& options = run.options;
+  Union u(run);
+  const auto& models = u.models;
+  if (models.size() < 2) return;
 
   struct Best {
     double error = std::numeric_limits<double>::infinity();
@@ -331,52 +426,30 @@ void search_union(DiagnosisRun& run) {
     const long wanted = static_cast<long>(models.size() - 1) * static_cast<long>(models.front().cases.size());
     if (run.within_budget(wanted) < wanted) break;
     bool trained = false;
-    model_time([&] { trained = emulator.train(rows); });
+    u.model_time([&] { trained = u.emulator.train(u.rows); });
     if (!trained) break;
     std::vector<RunRequest> requests;
     std::vector<std::size_t> of_model;
     std::vector<Eigen::VectorXd> points;
     std::vector<std::map<std::string, double>> sets;
-    std::vector<const Row*> ranked;
-    for (const auto& r : rows) ranked.push_back(&r);
-    std::stable_sort(ranked.begin(), ranked.end(), [](const Row* a, const Row* b) { return a->fitness < b->fitness; });
     for (std::size_t i = 1; i < models.size(); ++i) {
       const UnionModel& m = models[i];
-      // Starts: the model's own best runs, then the base's and every other model's, each with this
-      // model's parameters at its calibration's best: what the others found about the base parameters.
-      const Eigen::VectorXd fit = layout.point(m.index, run.best_sets.at(m.candidate->effect));
+      const Eigen::VectorXd fit = u.layout.point(m.index, run.best_sets.at(m.candidate->effect));
       if (fit.size() == 0) continue;
-      std::vector<Eigen::VectorXd> starts = {fit};
       std::vector<Eigen::VectorXd> taken;
-      for (const Row* r : ranked) {
-        if (r->model == m.index) {
-          taken.push_back(r->x);
-          if (starts.size() < 4) starts.push_back(r->x);
-        }
-      }
-      for (int other = -1; other < layout.models(); ++other) {
-        if (other == m.index) continue;
-        int added = 0;
-        for (const Row* r : ranked) {
-          if (r->model != other || added >= 2) continue;
-          Eigen::VectorXd s = fit;
-          for (Eigen::Index k = 0; k < run.config.space.dimension(); ++k) s(k) = r->x(k);
-          starts.push_back(s);
-          ++added;
-        }
-      }
+      const std::vector<Eigen::VectorXd> starts = u.starts({m.index}, fit, taken);
       double predicted = 0;
       Eigen::VectorXd x;
-      model_time([&] { x = propose(emulator, layout, m.index, starts, taken, rng, predicted); });
+      u.model_time([&] { x = propose(u.emulator, u.layout, {m.index}, starts, taken, u.rng, predicted); });
       if (x.size() == 0) continue;
-      const std::map<std::string, double> set = complete_parameters(m.fitted, layout.parameters(m.index, x));
+      const std::map<std::string, double> set = complete_parameters(m.fitted, u.layout.parameters(m.index, x));
       points.push_back(x);
       sets.push_back(set);
       of_model.push_back(i);
       requests.push_back({&m.extended->config, set, &run.base.residuals});
       progress(options, "union search, round " + std::to_string(round) + ": base + " + m.candidate->effect +
                             " predicted at fitness " + format_number(predicted, 4) + " by an emulator of " +
-                            std::to_string(rows.size()) + " runs over " + std::to_string(layout.dimension()) +
+                            std::to_string(u.rows.size()) + " runs over " + std::to_string(u.layout.dimension()) +
                             " parameters");
     }
     if (requests.empty()) break;
@@ -388,38 +461,37 @@ void search_union(DiagnosisRun& run) {
       ++rounds[i];
       const Evaluation& e = evaluations[j];
       if (!e.ok) continue;
-      const Eigen::VectorXd outputs = fitted_outputs(e, m.fitted, m.cases);
-      if (outputs.size() > 0) rows.push_back({points[j], outputs, curve_fitness(outputs, grid_pointers), m.index});
+      u.add_row(e, points[j], {m.index}, m.fitted, m.cases);
       if (std::isfinite(e.error) && e.error < best[i].error) best[i] = {e.error, sets[j]};
       progress(options, "union search, round " + std::to_string(round) + ": base + " + m.candidate->effect +
                             " simulated, error " + format_number(e.error, 3) + " N (its calibration's " +
                             format_number(m.candidate->error, 3) + " N)");
     }
   }
-  run.runner.add_model_seconds(model_s);
+  run.runner.add_model_seconds(u.model_s);
 
   // Each candidate's best proposal, judged as its calibration's fit is, where it ran below that fit.
   for (std::size_t i = 1; i < models.size(); ++i) {
     EffectCandidate& c = *models[i].candidate;
-    UnionSearch& u = c.union_search;
-    u.rounds = rounds[i];
-    u.simulations = proposed[i];
-    u.training_rows = static_cast<long>(rows.size());
-    u.error_before = c.error;
+    UnionSearch& us = c.union_search;
+    us.rounds = rounds[i];
+    us.simulations = proposed[i];
+    us.training_rows = static_cast<long>(u.rows.size());
+    us.error_before = c.error;
     if (!(best[i].error < c.error)) {
-      c.simulations += u.simulations;
+      c.simulations += us.simulations;
       continue;
     }
     const std::vector<Evaluation> runs = runs_with_reruns(models[i].extended->config, models[i].fitted, best[i].set,
                                                           &run.base.residuals, options.scatter_runs, run.runner);
-    u.simulations += static_cast<long>(runs.size());
-    c.simulations += u.simulations;
+    us.simulations += static_cast<long>(runs.size());
+    c.simulations += us.simulations;
     EffectCandidate judged = c;
     if (!judge_fit(judged, runs)) continue;
-    u.error_found = judged.error;
+    us.error_found = judged.error;
     if (!(judged.error < c.error)) continue;
-    u.kept = true;
-    judged.union_search = u;
+    us.kept = true;
+    judged.union_search = us;
     judged.fitness = Diagnosis::kNaN;  // a direct run: the campaign's objective was not computed
     std::map<std::string, double> own;
     for (const auto& name : models[i].fitted.space.free_names()) own[name] = best[i].set.at(name);
@@ -427,8 +499,144 @@ void search_union(DiagnosisRun& run) {
     c = std::move(judged);
     run.best_sets[c.effect] = best[i].set;
     progress(options, "union search: base + " + c.effect + " kept at " + format_number(c.error, 3) + " N (its calibration: " +
-                          format_number(u.error_before, 3) + " N)");
+                          format_number(us.error_before, 3) + " N)");
   }
+}
+
+namespace {
+
+// Pairs judged at most (those whose best run beats both of their effects' fits, lowest first): each
+// costs its best set's runs and re-runs.
+constexpr std::size_t kJudgedPairs = 3;
+
+// A pair of the union's models and the model with both effects: the first's model extended by the
+// second effect at its target, searched in the first's space and the second's own parameters.
+struct PairModel {
+  std::size_t first = 0, second = 0;  // Union::models indices
+  std::vector<int> on;                 // their UnionLayout indices
+  ExtendedModel extended;
+  CampaignConfig fitted;
+  std::vector<ArchivedCase> cases;
+  double best_error = std::numeric_limits<double>::infinity();
+  std::map<std::string, double> best_set;
+  long simulations = 0;
+};
+
+}  // namespace
+
+std::vector<PairFit> search_pairs(DiagnosisRun& run) {
+  if (run.options.pair_rounds <= 0) return {};
+  const DiagnoseOptions& options = run.options;
+  PairSearch& report = run.d.pair_search;
+  Union u(run);
+  const auto& models = u.models;
+  std::vector<PairModel> pairs;
+  const dem::ResponseScales scales{std::isfinite(run.d.peak_normal_stress) ? run.d.peak_normal_stress : 0,
+                                   std::isfinite(run.d.start_normal_stress) ? run.d.start_normal_stress : 0};
+  for (std::size_t i = 1; i < models.size(); ++i)
+    for (std::size_t j = i + 1; j < models.size(); ++j) {
+      PairModel p;
+      p.first = i;
+      p.second = j;
+      p.on = {models[i].index, models[j].index};
+      const ExtendedModel& first = *models[i].extended;
+      CampaignConfig with_first = first.config;
+      with_first.space = extended_space(first, run.config, run.d.base_params, options);
+      const EffectCandidate& second = *models[j].candidate;
+      const fs::path folder = fs::path(options.out) / "pairs" / (models[i].candidate->effect + "+" + second.effect);
+      p.extended = extend(with_first, dem::find_effect(second.effect),
+                          second.target.empty() ? std::vector<std::string>{} : std::vector<std::string>{second.target},
+                          scales, folder);
+      p.fitted = fitted_cases(p.extended.config, options);
+      p.fitted.space = extended_space(p.extended, with_first, run.best_sets.at(models[i].candidate->effect), options);
+      p.cases = archived_cases(p.fitted, u.case_grids);
+      pairs.push_back(std::move(p));
+    }
+  if (pairs.empty()) return {};
+
+  for (int round = 1; round <= options.pair_rounds; ++round) {
+    const long wanted = static_cast<long>(pairs.size()) * static_cast<long>(models.front().cases.size());
+    if (run.within_budget(wanted) < wanted) break;
+    bool trained = false;
+    u.model_time([&] { trained = u.emulator.train(u.rows); });
+    if (!trained) break;
+    std::vector<RunRequest> requests;
+    std::vector<std::size_t> of_pair;
+    std::vector<Eigen::VectorXd> points;
+    std::vector<std::map<std::string, double>> sets;
+    for (std::size_t k = 0; k < pairs.size(); ++k) {
+      const PairModel& p = pairs[k];
+      // the first effect's fit with the second's parameters at its own fit
+      std::map<std::string, double> at_fits = run.best_sets.at(models[p.second].candidate->effect);
+      for (const auto& [name, value] : run.best_sets.at(models[p.first].candidate->effect)) at_fits[name] = value;
+      const Eigen::VectorXd fit = p.best_set.empty() ? u.layout.point(p.on, at_fits) : u.layout.point(p.on, p.best_set);
+      if (fit.size() == 0) continue;
+      std::vector<Eigen::VectorXd> taken;
+      const std::vector<Eigen::VectorXd> starts = u.starts(p.on, fit, taken);
+      double predicted = 0;
+      Eigen::VectorXd x;
+      u.model_time([&] { x = propose(u.emulator, u.layout, p.on, starts, taken, u.rng, predicted); });
+      if (x.size() == 0) continue;
+      points.push_back(x);
+      sets.push_back(complete_parameters(p.fitted, u.layout.parameters(p.on, x)));
+      of_pair.push_back(k);
+      requests.push_back({&p.extended.config, sets.back(), &run.base.residuals});
+    }
+    if (requests.empty()) break;
+    report.rounds = round;
+    const std::vector<Evaluation> evaluations = run.runner.evaluate_all(requests);
+    for (std::size_t r = 0; r < evaluations.size(); ++r) {
+      PairModel& p = pairs[of_pair[r]];
+      ++p.simulations;
+      const Evaluation& e = evaluations[r];
+      u.add_row(e, points[r], p.on, p.fitted, p.cases);
+      if (e.ok && std::isfinite(e.error) && e.error < p.best_error) {
+        p.best_error = e.error;
+        p.best_set = sets[r];
+      }
+    }
+    std::string line;
+    for (const auto& p : pairs)
+      line += (line.empty() ? "" : ", ") + models[p.first].candidate->effect + " + " + models[p.second].candidate->effect +
+              " " + format_number(p.best_error, 3) + " N";
+    progress(options, "pair search, round " + std::to_string(round) + " (an emulator of " + std::to_string(u.rows.size()) +
+                          " runs): best so far " + line);
+  }
+  run.runner.add_model_seconds(u.model_s);
+
+  // The pairs whose best run beats both of their effects' fits, lowest first, judged on the median
+  // of their best set's runs.
+  std::vector<std::size_t> order;
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    const PairModel& p = pairs[k];
+    report.simulations += p.simulations;
+    report.pairs.push_back({{models[p.first].candidate->effect, models[p.second].candidate->effect},
+                            std::isfinite(p.best_error) ? p.best_error : PairSearch::kNaN});
+    if (p.best_error < models[p.first].candidate->error && p.best_error < models[p.second].candidate->error)
+      order.push_back(k);
+  }
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return pairs[a].best_error < pairs[b].best_error; });
+  if (order.size() > kJudgedPairs) order.resize(kJudgedPairs);
+  std::vector<PairFit> fits;
+  for (const std::size_t k : order) {
+    const PairModel& p = pairs[k];
+    const std::vector<Evaluation> runs =
+        runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
+    report.simulations += static_cast<long>(runs.size());
+    PairFit f;
+    f.pair = k;
+    f.first = models[p.first].candidate;
+    f.second = models[p.second].candidate;
+    f.model = p.extended;
+    f.set = p.best_set;
+    f.fit.effect = f.second->effect;
+    f.fit.target = f.second->target;
+    f.fit.tried = true;
+    f.fit.effect_parameters = f.first->effect_parameters + f.second->effect_parameters;
+    f.fit.params = p.best_set;
+    if (judge_fit(f.fit, runs)) fits.push_back(std::move(f));
+  }
+  return fits;
 }
 
 }  // namespace detail

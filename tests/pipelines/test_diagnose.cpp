@@ -683,6 +683,29 @@ ResampledCase resampled_case(std::vector<bool> good) {
 
 }  // namespace
 
+// A pair's fit (two effects found together) is added only where its criterion passes in enough
+// resamples: one to the noise against a broad misfit passes in every one; one that fits to the
+// noise in one of its three runs, in about a third; the same draw gives the same share.
+TEST(Evidence, APairPassesInTheShareOfResamplesItsRunsAllow) {
+  const std::vector<double> points{20};
+  std::vector<std::vector<ChannelResidual>> base, good, lucky;
+  for (std::uint64_t k = 0; k < 3; ++k) {
+    base.push_back({channel_missing_by(50, broad_misfit, 7)});
+    good.push_back({channel_missing_by(50, no_misfit, 7)});
+    lucky.push_back({channel_missing_by(50, k == 0 ? no_misfit : broad_misfit, 7)});
+  }
+  EXPECT_EQ(pair_frequency(base, good, 4, points, 10, 200, 1), 1.0);
+  EXPECT_EQ(pair_frequency(base, base, 4, points, 10, 200, 1), 0.0);
+  const double share = pair_frequency(base, lucky, 4, points, 10, 200, 1);
+  EXPECT_GT(share, 0.2);
+  EXPECT_LT(share, 0.5);
+  EXPECT_EQ(pair_frequency(base, lucky, 4, points, 10, 200, 1), share);
+  // the criterion counts both effects' parameters: a pair that gains less than their penalty fails
+  EXPECT_EQ(pair_frequency(base, good, 1000, points, 10, 200, 1), 0.0);
+  EXPECT_TRUE(std::isnan(pair_frequency(base, good, 4, points, 10, 0, 1)));
+  EXPECT_TRUE(std::isnan(pair_frequency({}, good, 4, points, 10, 200, 1)));
+}
+
 TEST(Evidence, AVerdictEveryResampleReachesHoldsWithItsFrequency) {
   ResampledCase r = resampled_case({true, true, true});
   ASSERT_EQ(r.d.outcome, DiagnosisOutcome::missing_effect) << r.d.verdict;
@@ -1034,6 +1057,32 @@ TEST(Evidence, TheUnionSpaceHoldsEveryModelWithTheOthersSwitchedOff) {
   EXPECT_EQ(layout.parameters(-1, x).size(), 2u);
   const Eigen::VectorXd round_trip = layout.point(0, layout.parameters(0, s));
   for (Eigen::Index k = 0; k < s.size(); ++k) EXPECT_NEAR(round_trip(k), s(k), 1e-12) << k;
+
+  // two models on together (the pair search): both switches and both models' own parameters
+  const std::map<std::string, double> both_set = {{"kn", 1e9}, {"friction_deg", 35}, {"support_kx", 1e6},
+                                                  {"closure_max", 1e-4}, {"closure_exponent", 2}};
+  const Eigen::VectorXd both = layout.point(std::vector<int>{0, 1}, both_set);
+  ASSERT_EQ(both.size(), 7);
+  EXPECT_EQ(both(2), 1);
+  EXPECT_NEAR(both(3), 1.0 / 3, 1e-12);
+  EXPECT_EQ(both(4), 1);
+  EXPECT_NEAR(both(5), 0.5, 1e-12);
+  EXPECT_NEAR(both(6), 0.5, 1e-12);
+  EXPECT_EQ(layout.point(std::vector<int>{0, 1}, {{"kn", 1e9}, {"friction_deg", 35}, {"support_kx", 1e6}}).size(), 0);
+  EXPECT_EQ(layout.coordinates(std::vector<int>{0, 1}), (std::vector<Eigen::Index>{0, 1, 3, 5, 6}));
+  EXPECT_EQ(layout.switched(std::vector<int>{}, both), layout.switched(-1, both));
+  const Eigen::VectorXd one = layout.switched(std::vector<int>{1}, both);
+  EXPECT_EQ(one(2), 0);
+  EXPECT_EQ(one(3), 0.5);  // the model switched off goes to the middle of its box
+  EXPECT_EQ(one(4), 1);
+  Eigen::VectorXd low = both;
+  low(0) = 0;  // kn 1e8: within the support model's box, below the closure model's
+  const auto pair = layout.parameters(std::vector<int>{0, 1}, low);
+  ASSERT_EQ(pair.size(), 5u);
+  EXPECT_DOUBLE_EQ(pair.at("kn"), 1e9);
+  EXPECT_DOUBLE_EQ(layout.parameters(0, low).at("kn"), 1e8);
+  for (const auto& [name, value] : layout.parameters(std::vector<int>{0, 1}, both))
+    EXPECT_NEAR(value / both_set.at(name), 1, 1e-12) << name;
 }
 
 // Where the base response splits, step 4 does not prune by signature: on the goal study's
@@ -1211,6 +1260,9 @@ TEST(Diagnose, BadOptionsAreRejectedNamingTheValue) {
   o.union_rounds = -1;
   expect_rejected(o, "--union-rounds -1", "a negative count of union rounds");
   o.union_rounds = 0;
+  o.pair_rounds = -1;
+  expect_rejected(o, "--pair-rounds -1", "a negative count of pair rounds");
+  o.pair_rounds = 0;
   o.close_target_share = 0;
   expect_rejected(o, "--close-target-share 0", "a share of the best target's signature of 0");
   o.close_target_share = 1.5;
@@ -1505,6 +1557,54 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
   EXPECT_GE(with_surrogate, 2) << "the refinement and the candidate search with bo";
 }
 
+// Where no effect passes alone and the base misses the curves (here every criterion is held short by
+// an evidence threshold no fit can pass), the pair search runs its rounds, one point per pair of
+// calibrated candidates each, counted and reported; a pair is added only where it passes, which it
+// cannot here either, and the diagnosis goes on to the tentative effect as before.
+TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "pairs");
+  const json j = small_search_campaign(dir, "pairs");
+  DiagnoseOptions o = small_search_options(dir / "out", {"support-compliance", "friction-softening"});
+  o.candidates = 2;
+  o.union_rounds = 0;
+  o.continued_simulations = 0;
+  o.evidence = 1e6;
+  o.pair_rounds = 2;
+  o.max_effects = 2;
+  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "pairs.json"), o);
+  ASSERT_EQ(d.status, CampaignStatus::completed) << d.message;
+  ASSERT_EQ(d.outcome, DiagnosisOutcome::unexplained) << d.verdict;  // the soft abutment misses by far more than the noise
+  const PairSearch& p = d.pair_search;
+  EXPECT_EQ(p.rounds, 2);
+  ASSERT_EQ(p.pairs.size(), 1u);
+  EXPECT_EQ(p.pairs[0].effects, (std::vector<std::string>{"support-compliance", "friction-softening"}));
+  EXPECT_GE(p.simulations, 2);
+  EXPECT_FALSE(p.accepted);
+  EXPECT_TRUE(d.chosen.empty());
+  EXPECT_NE(d.verdict.find("Pairs of effects searched together (1 pair, 2 rounds, " + std::to_string(p.simulations) +
+                           " simulations)"),
+            std::string::npos)
+      << d.verdict;
+  if (std::isfinite(p.criterion)) {  // a judged pair: its fit beat both effects' fits alone
+    EXPECT_GT(p.criterion, -o.evidence);
+    EXPECT_EQ(p.rerun_errors.size(), 1u + static_cast<std::size_t>(o.scatter_runs));
+    EXPECT_LT(p.error, d.error_before);
+    EXPECT_GT(p.params.size(), d.base_params.size()) << "a set of the model with both effects";
+  }
+  const json written = test_support::read_json(dir / "out" / "diagnosis.json");
+  ASSERT_TRUE(written["pair_search"].is_object());
+  EXPECT_EQ(written["pair_search"]["rounds"], 2);
+  EXPECT_EQ(written["pair_search"]["simulations"], p.simulations);
+  EXPECT_EQ(written["pair_search"]["accepted"], false);
+  // without rounds the search does not run and is not reported
+  o.pair_rounds = 0;
+  o.out = (dir / "none").string();
+  const Diagnosis none = run_diagnosis(campaign_from_json(j, dir.string(), "pairs.json"), o);
+  EXPECT_EQ(none.pair_search.rounds, 0);
+  EXPECT_TRUE(test_support::read_json(dir / "none" / "diagnosis.json")["pair_search"].is_null());
+  EXPECT_EQ(none.simulations, d.simulations - p.simulations);
+}
+
 // The union search on the small search: its rounds propose a point per candidate, each simulated
 // and counted, and a candidate keeps the proposal only where it fits better than its calibration.
 TEST(DiagnoseLoop, TheUnionSearchProposesAPointPerCandidateEachRound) {
@@ -1626,6 +1726,7 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   o.candidate_simulations = 24;
   o.continued_simulations = 0;
   o.parameter_bounds = false;
+  o.pair_rounds = 0;  // effects added one after another (the pair search: its own test)
   o.progress = false;
   const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "steps.json"), o);
   const json written = test_support::read_json(dir / "out" / "diagnosis.json");

@@ -335,6 +335,12 @@ struct DiagnoseOptions {
   // diagnosis; each round searches it for every candidate from many starts and simulates the best
   // point of each (measured: docs/diagnose.md, step 4b). 0: none.
   int union_rounds = 6;
+  // --pair-rounds: rounds of the pair search (PairSearch; docs/diagnose.md, step 8) where no effect
+  // passes alone and the base fit misses the curves ("no effect found"): the union search's
+  // emulator searched for every pair of calibrated candidates with both switched on, the best point
+  // of each pair simulated per round. Needs the removal check (it re-fits each effect of a pair
+  // without the other) and --max-effects other than 1. 0: none.
+  int pair_rounds = 8;
   // --max-effects: effects added at most. After an effect is accepted the diagnosis starts again
   // from the model with it (its fit the new base, the other effects the candidates), until no
   // further effect passes; 0 = no limit, 1 = one effect per diagnosis.
@@ -378,6 +384,37 @@ struct UnionSearch {
   double error_found = kNaN;   // the best proposal, on the median of its re-runs, N (NaN: none ran)
   bool kept = false;           // that fit replaced the calibration's (a lower error)
   std::string describe(const std::string& effect) const;  // a sentence for the report
+  nlohmann::json to_json() const;
+};
+
+// The pair search (DiagnoseOptions::pair_rounds): two effects that each explain part of the residual
+// may pass only together, since each alone is searched from a base fit that compensates for both.
+// Every pair of calibrated candidates (each effect at its kept target) is searched on one emulator
+// of the curves over the base parameters and the candidates' (the union search's, its rows grown by
+// the pairs' runs) with both switched on; the pairs whose best run beats both of their effects'
+// fits are judged on the median of their re-runs, and the one of lowest criterion against the base
+// (both effects' parameters counted) is added when that criterion passes and enough resamples agree.
+struct PairSearch {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  struct Pair {
+    std::vector<std::string> effects;  // the two, in the candidates' order
+    double best_run_error = kNaN;      // the best of its proposals (a single run), N
+    double error = kNaN;               // judged: the median of its best set's runs, N (NaN: not judged)
+    double criterion = kNaN;           // judged: against the base, both effects' parameters counted
+  };
+  int rounds = 0;                        // rounds run (0: the search did not run)
+  long simulations = 0;                  // every proposal and the judged sets' re-runs
+  std::vector<Pair> pairs;
+  // The pair of lowest criterion among the judged ones that lower the error without spoiling
+  // held-out data (empty: none): its fit, and whether it was added.
+  std::vector<std::string> effects;
+  std::map<std::string, double> params;  // its best set, every parameter of the model with both
+  std::vector<double> rerun_errors;
+  double error = kNaN;                   // N, the median run
+  double criterion = kNaN;
+  double frequency = kNaN;               // share of resamples in which it passes (pair_frequency)
+  bool accepted = false;
   nlohmann::json to_json() const;
 };
 
@@ -504,6 +541,7 @@ struct Diagnosis {
     bool dropped = false;
   };
   std::vector<RemovalCheck> removal_checks;
+  PairSearch pair_search;  // DiagnoseOptions::pair_rounds
   DiagnosisOutcome outcome = DiagnosisOutcome::no_effect_needed;
   // The verdict three ways: `headline`, one sentence a person reads first ("Missing:
   // support-compliance at abutment_right: support_kx ≈ 1.83 MN/m (1.2–3.1 MN/m); force error 232 ->
@@ -621,6 +659,13 @@ class UnionLayout {
   // The free parameters of model `model` (-1: the base) at union point `x`, physical, within the
   // box of that model's own space.
   std::map<std::string, double> parameters(int model, const Eigen::VectorXd& x) const;
+  // The same for several models switched on together (none: the base), the combination whose
+  // effects are all on: `params` must hold every model's own parameters, and the base parameters
+  // come back within every such model's box.
+  Eigen::VectorXd point(const std::vector<int>& on, const std::map<std::string, double>& params) const;
+  Eigen::VectorXd switched(const std::vector<int>& on, Eigen::VectorXd x) const;
+  std::vector<Eigen::Index> coordinates(const std::vector<int>& on) const;
+  std::map<std::string, double> parameters(const std::vector<int>& on, const Eigen::VectorXd& x) const;
 
  private:
   struct Block {
@@ -689,6 +734,16 @@ struct FitRuns {
 Diagnosis::VerdictFrequency verdict_frequency(const Diagnosis& diagnosis, const FitRuns& base_runs,
                                               const std::vector<double>& effective_points,
                                               const DiagnoseOptions& options, std::uint64_t seed);
+
+// How often a fit of two effects found together (PairSearch) passes against the base on
+// `resamples` resamples drawn as verdict_frequency draws them: one of the base fit's runs and one of
+// the pair fit's, and one moving-block bootstrap of every channel's grid points. It passes where its
+// criterion change (`parameters` of both effects, `effective_points`) falls below -evidence and its
+// error below the base's. NaN without runs or resamples. A deterministic function of its inputs.
+double pair_frequency(const std::vector<std::vector<ChannelResidual>>& base_runs,
+                      const std::vector<std::vector<ChannelResidual>>& pair_runs, int parameters,
+                      const std::vector<double>& effective_points, double evidence, int resamples,
+                      std::uint64_t seed);
 
 // The verdict when its choice holds in fewer than options.verdict_share of the resamples
 // (diagnosis.frequency): "no effect" when at least that share of them choose no effect (needed, or
