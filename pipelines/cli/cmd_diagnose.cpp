@@ -91,8 +91,9 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--pair-rounds", o.pair_rounds,
                   "Rounds of the pair search where no effect passes alone and the base misses the curves: the "
-                  "union search's emulator searched for every pair of candidates with both switched on, each round "
-                  "simulating its best point for each pair (0 = none)")
+                  "union search's emulator searched with both effects of a pair switched on, each round simulating "
+                  "its best point for each pair near the pair's best run; the closest pair is then calibrated "
+                  "(0 = none)")
       ->capture_default_str();
   sub->add_option("--candidate-starts", o.candidate_starts,
                   "Points of each candidate's search design that start from a base fit: the best, then the best "

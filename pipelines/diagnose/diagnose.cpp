@@ -220,7 +220,8 @@ json PairSearch::to_json() const {
   json tried = json::array();
   for (const auto& p : pairs)
     tried.push_back({{"effects", p.effects}, {"best_run_error", finite_or_null(p.best_run_error)},
-                     {"error", finite_or_null(p.error)}, {"criterion", finite_or_null(p.criterion)}});
+                     {"calibrated", p.calibrated}, {"error", finite_or_null(p.error)},
+                     {"criterion", finite_or_null(p.criterion)}});
   return {{"rounds", rounds}, {"simulations", simulations}, {"pairs", tried}, {"effects", effects},
           {"params", params_json(params)}, {"rerun_errors", rerun_errors}, {"error", finite_or_null(error)},
           {"criterion", finite_or_null(criterion)}, {"frequency", finite_or_null(frequency)}, {"accepted", accepted}};

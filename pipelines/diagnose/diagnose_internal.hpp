@@ -226,6 +226,10 @@ bool signature_comes_close(double score, double reference, double share);
 std::vector<double> score_candidates(Diagnosis& d);
 // The candidate of the first effect chosen (Diagnosis::chosen.front()); null when none is.
 const EffectCandidate* chosen_candidate(const Diagnosis& d);
+// The tried candidate of lowest criterion among those whose criterion falls and whose fit lowers the
+// error without spoiling the held-out data (the lead of an unexplained residual: the tentative
+// effect, the first of the pair search's pairs with effects not calibrated); null when none does.
+const EffectCandidate* unexplained_lead(const Diagnosis& d, const DiagnoseOptions& options);
 // The diagnosis's error floor (error_floor of its base noise and scatter), N.
 double floor_of(const Diagnosis& d, const DiagnoseOptions& options);
 // "RMS force error E N, noise about N N, simulation scatter about S N" of the base fit.
@@ -293,10 +297,12 @@ void calibrate_candidates(DiagnosisRun& run);          // 4. extension.cpp
 // is lower (EffectCandidate::union_search).
 void search_union(DiagnosisRun& run);
 // 8a. The pair search (DiagnoseOptions::pair_rounds; union_search.cpp), where no effect passes
-// alone: the union search's emulator searched for every pair of calibrated candidates with both
-// switched on, the best point of each pair simulated per round (into run.d.pair_search); the pairs
-// whose best run beats both of their effects' fits (at most three, lowest first) judged on the
-// median of their best set's runs.
+// alone: every pair of calibrated candidates, and the lead (unexplained_lead) with every effect
+// probed but not calibrated; the union search's emulator searched with both switched on within a
+// trust region around each pair's best run, its best point simulated per round (into
+// run.d.pair_search); the pairs whose best run beats their calibrated effects' fits (at most three,
+// lowest first) judged on the median of their runs, the closest after a candidate's calibration
+// from its best run.
 struct PairFit {
   std::size_t pair = 0;                    // its entry of PairSearch::pairs
   const EffectCandidate* first = nullptr;  // the candidates of its two effects, in the candidates' order

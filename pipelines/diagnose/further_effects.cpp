@@ -281,10 +281,12 @@ bool add_pair(DiagnosisRun& run) {
                                     o.resamples, static_cast<std::uint64_t>(run.config.optimiser.seed));
   // without resamples (--resamples 0) the criterion decides alone
   report.accepted = best->fit.score < -o.evidence && !(report.frequency < o.verdict_share);
+  const auto alone = [](const EffectCandidate& c) {
+    return c.effect + (c.tried ? " alone " + format_number(c.error, 3) + " N" : " not calibrated alone");
+  };
   const std::string found = pair_text + " together fit to " + format_number(best->fit.error, 3) + " N (" +
-                            best->first->effect + " alone " + format_number(best->first->error, 3) + " N, " +
-                            best->second->effect + " alone " + format_number(best->second->error, 3) +
-                            " N), criterion " + format_number(best->fit.score, 3) + " against the base" +
+                            alone(*best->first) + ", " + alone(*best->second) + "), criterion " +
+                            format_number(best->fit.score, 3) + " against the base" +
                             (std::isfinite(report.frequency) ? ", passing in " + percent(report.frequency) + " of " +
                                                                    std::to_string(o.resamples) + " resamples"
                                                              : "");
@@ -298,6 +300,7 @@ bool add_pair(DiagnosisRun& run) {
                                    std::isfinite(d.start_normal_stress) ? d.start_normal_stress : 0};
   std::vector<ModelEffect> effects;
   for (auto& m : members) {
+    m.effect_parameters = static_cast<int>(run.models.at(m.effect).parameter_names.size());
     m.params = best->set;
     m.residuals = best->fit.residuals;
     m.error = best->fit.error;

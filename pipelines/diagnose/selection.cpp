@@ -249,11 +249,7 @@ void select_effect(Diagnosis& d, const DiagnoseOptions& options) {
   }
 }
 
-namespace {
-
-// The tried candidate of lowest criterion among those whose criterion falls and whose fit lowers the
-// error without spoiling the held-out data; null when none does.
-const EffectCandidate* unexplained_lead(const Diagnosis& d, const DiagnoseOptions& options) {
+const EffectCandidate* detail::unexplained_lead(const Diagnosis& d, const DiagnoseOptions& options) {
   const EffectCandidate* best = nullptr;
   for (const auto& c : d.candidates) {
     if (!c.tried || !(c.score < 0) || !(c.error < d.error_before) || check_held_out(c, d, options).spoils) continue;
@@ -261,8 +257,6 @@ const EffectCandidate* unexplained_lead(const Diagnosis& d, const DiagnoseOption
   }
   return best;
 }
-
-}  // namespace
 
 std::vector<std::string> candidates_to_search_further(const Diagnosis& d, const DiagnoseOptions& options) {
   const double floor = floor_of(d, options);

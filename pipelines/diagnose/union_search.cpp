@@ -60,10 +60,7 @@ const optimise::ParameterSpec& spec_of(const optimise::ParameterSpace& space, co
   throw std::invalid_argument("union search: " + name + " is not a free parameter of the model");
 }
 
-}  // namespace
-
-namespace {
-
+// The models switched on for model `model` (-1: the base, none).
 std::vector<int> models_on(int model) { return model < 0 ? std::vector<int>{} : std::vector<int>{model}; }
 
 }  // namespace
@@ -210,17 +207,25 @@ class Emulator {
   surrogate::CurveEnsemble ensemble_;
 };
 
+// Where a search of the emulator may go: per union coordinate, [lower, upper] within [0, 1].
+struct Box {
+  Eigen::VectorXd lower, upper;
+  static Box whole(Eigen::Index dimension) {
+    return {Eigen::VectorXd::Zero(dimension), Eigen::VectorXd::Ones(dimension)};
+  }
+};
+
 // A compass search of `x` along `coordinates` on the emulator: each coordinate moved by ± step, the
 // best move taken, the step halved when none improves; `value` is x's prediction, updated.
-void compass_search(const Emulator& emulator, const std::vector<Eigen::Index>& coordinates, Eigen::VectorXd& x,
-                    double& value) {
+void compass_search(const Emulator& emulator, const std::vector<Eigen::Index>& coordinates, const Box& box,
+                    Eigen::VectorXd& x, double& value) {
   for (double step = kFirstStep; step >= kLastStep;) {
     Eigen::VectorXd best = x;
     double best_value = value;
     for (const Eigen::Index k : coordinates)
       for (const double sign : {-1.0, 1.0}) {
         Eigen::VectorXd trial = x;
-        trial(k) = std::clamp(trial(k) + sign * step, 0.0, 1.0);
+        trial(k) = std::clamp(trial(k) + sign * step, box.lower(k), box.upper(k));
         if (trial(k) == x(k)) continue;
         const double v = emulator.fitness(trial);
         if (v < best_value) {
@@ -237,27 +242,29 @@ void compass_search(const Emulator& emulator, const std::vector<Eigen::Index>& c
   }
 }
 
-// Where the emulator puts the best point of the models `on` switched on together: random points over its coordinates and
-// `starts` scored, the best kLocalStarts refined; the best refined point at least kSeparation from
-// every point of `taken` (its runs and proposals so far). Empty when every refined point is taken.
+// Where the emulator puts the best point of the models `on` switched on together within `box`:
+// random points over their coordinates and `starts` (clipped into the box) scored, the best
+// kLocalStarts refined; the best refined point at least kSeparation from every point of `taken` (its
+// runs and proposals so far). Empty when every refined point is taken.
 Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, const std::vector<int>& on,
                         const std::vector<Eigen::VectorXd>& starts, const std::vector<Eigen::VectorXd>& taken,
-                        std::mt19937_64& rng, double& predicted) {
+                        std::mt19937_64& rng, double& predicted, const Box& box) {
   const std::vector<Eigen::Index> coordinates = layout.coordinates(on);
   std::vector<std::pair<double, Eigen::VectorXd>> scored;
   for (const auto& s : starts) {
-    const Eigen::VectorXd x = layout.switched(on, s);
+    Eigen::VectorXd x = layout.switched(on, s);
+    x = x.cwiseMax(box.lower).cwiseMin(box.upper);
     scored.emplace_back(emulator.fitness(x), x);
   }
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   for (int i = 0; i < kRandomPoints; ++i) {
     Eigen::VectorXd x = layout.switched(on, starts.front());
-    for (const Eigen::Index k : coordinates) x(k) = unit(rng);
+    for (const Eigen::Index k : coordinates) x(k) = box.lower(k) + (box.upper(k) - box.lower(k)) * unit(rng);
     scored.emplace_back(emulator.fitness(x), x);
   }
   std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   scored.resize(std::min<std::size_t>(scored.size(), kLocalStarts));
-  for (auto& [value, x] : scored) compass_search(emulator, coordinates, x, value);
+  for (auto& [value, x] : scored) compass_search(emulator, coordinates, box, x, value);
   std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   const auto distance = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
     double sum = 0;
@@ -288,7 +295,9 @@ Eigen::VectorXd fitted_outputs(const Evaluation& e, const CampaignConfig& fitted
 // The models of the union (the base and every calibrated candidate's), its layout, its rows (every
 // archived run of those models on this step's objective grid) and its emulator.
 struct Union {
-  explicit Union(DiagnosisRun& run);
+  // `untried`: the effects probed in step 3 and not calibrated join too (at their best-signature
+  // target, with no run yet), after the calibrated ones.
+  Union(DiagnosisRun& run, bool untried);
 
   CampaignConfig base_fitted;
   std::vector<CaseCurveGrid> case_grids;
@@ -339,7 +348,7 @@ surrogate::MlpOptions emulator_options(const DiagnosisRun& run) {
   return mlp;
 }
 
-Union::Union(DiagnosisRun& run)
+Union::Union(DiagnosisRun& run, bool untried)
     : base_fitted(fitted_cases(run.config, run.options)),
       case_grids(campaign_curve_grids(base_fitted)),
       grids(grid_pointers(case_grids)),
@@ -349,8 +358,7 @@ Union::Union(DiagnosisRun& run)
   models.resize(1);
   models.front().fitted = base_fitted;
   models.front().cases = archived_cases(base_fitted, case_grids);
-  for (auto& c : run.d.candidates) {
-    if (!c.tried || !std::isfinite(c.error) || !run.models.count(c.effect)) continue;
+  const auto add = [&](EffectCandidate& c) {
     UnionModel m;
     m.candidate = &c;
     m.extended = &run.models.at(c.effect);
@@ -359,7 +367,12 @@ Union::Union(DiagnosisRun& run)
     m.cases = archived_cases(m.fitted, case_grids);
     m.index = layout.add_model(m.fitted.space);
     models.push_back(std::move(m));
-  }
+  };
+  for (auto& c : run.d.candidates)
+    if (c.tried && std::isfinite(c.error) && run.models.count(c.effect)) add(c);
+  if (untried)
+    for (auto& c : run.d.candidates)
+      if (!c.tried && run.models.count(c.effect) && run.warm_starts.count(c.effect)) add(c);
   // Every archived run of the models, on the grids of this step's objective: a further step's base
   // model ran in the steps before it, whose archives come first.
   std::set<std::pair<int, std::vector<double>>> seen;
@@ -411,7 +424,7 @@ bool Union::add_row(const Evaluation& e, const Eigen::VectorXd& x, const std::ve
 
 void search_union(DiagnosisRun& run) {
   const DiagnoseOptions& options = run.options;
-  Union u(run);
+  Union u(run, false);
   const auto& models = u.models;
   if (models.size() < 2) return;
 
@@ -440,7 +453,9 @@ void search_union(DiagnosisRun& run) {
       const std::vector<Eigen::VectorXd> starts = u.starts({m.index}, fit, taken);
       double predicted = 0;
       Eigen::VectorXd x;
-      u.model_time([&] { x = propose(u.emulator, u.layout, {m.index}, starts, taken, u.rng, predicted); });
+      u.model_time([&] {
+        x = propose(u.emulator, u.layout, {m.index}, starts, taken, u.rng, predicted, Box::whole(u.layout.dimension()));
+      });
       if (x.size() == 0) continue;
       const std::map<std::string, double> set = complete_parameters(m.fitted, u.layout.parameters(m.index, x));
       points.push_back(x);
@@ -508,17 +523,22 @@ namespace {
 // Pairs judged at most (those whose best run beats both of their effects' fits, lowest first): each
 // costs its best set's runs and re-runs.
 constexpr std::size_t kJudgedPairs = 3;
+// A pair's trust region: its first, largest and least half-width in the unit cube.
+constexpr double kFirstRadius = 0.1, kLargestRadius = 0.4, kLeastRadius = 1.0 / 64;
 
 // A pair of the union's models and the model with both effects: the first's model extended by the
 // second effect at its target, searched in the first's space and the second's own parameters.
 struct PairModel {
   std::size_t first = 0, second = 0;  // Union::models indices
   std::vector<int> on;                 // their UnionLayout indices
+  CampaignConfig with_first;           // the base model with the first effect, in its calibration's space
   ExtendedModel extended;
   CampaignConfig fitted;
   std::vector<ArchivedCase> cases;
   double best_error = std::numeric_limits<double>::infinity();
   std::map<std::string, double> best_set;
+  Eigen::VectorXd incumbent;  // the union point of best_set (empty: no run yet)
+  double radius = kFirstRadius;
   long simulations = 0;
 };
 
@@ -528,63 +548,99 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
   if (run.options.pair_rounds <= 0) return {};
   const DiagnoseOptions& options = run.options;
   PairSearch& report = run.d.pair_search;
-  Union u(run);
+  Union u(run, true);
   const auto& models = u.models;
+  // An effect's fit: its calibration's best set, or for one not calibrated its best probe's set.
+  const auto fit_of = [&](const UnionModel& m) -> const std::map<std::string, double>& {
+    const auto found = run.best_sets.find(m.candidate->effect);
+    return found != run.best_sets.end() ? found->second : run.warm_starts.at(m.candidate->effect);
+  };
+  // Every pair of calibrated candidates, and the lead of the residual (the fit a tentative effect
+  // would start from) with every effect probed but not calibrated: the partner it would look for.
+  std::vector<std::pair<std::size_t, std::size_t>> chosen;
+  const EffectCandidate* lead = unexplained_lead(run.d, options);
+  for (std::size_t i = 1; i < models.size(); ++i)
+    for (std::size_t j = i + 1; j < models.size(); ++j)
+      if (models[j].candidate->tried || models[i].candidate == lead) chosen.emplace_back(i, j);
   std::vector<PairModel> pairs;
   const dem::ResponseScales scales{std::isfinite(run.d.peak_normal_stress) ? run.d.peak_normal_stress : 0,
                                    std::isfinite(run.d.start_normal_stress) ? run.d.start_normal_stress : 0};
-  for (std::size_t i = 1; i < models.size(); ++i)
-    for (std::size_t j = i + 1; j < models.size(); ++j) {
-      PairModel p;
-      p.first = i;
-      p.second = j;
-      p.on = {models[i].index, models[j].index};
-      const ExtendedModel& first = *models[i].extended;
-      CampaignConfig with_first = first.config;
-      with_first.space = extended_space(first, run.config, run.d.base_params, options);
-      const EffectCandidate& second = *models[j].candidate;
-      const fs::path folder = fs::path(options.out) / "pairs" / (models[i].candidate->effect + "+" + second.effect);
-      p.extended = extend(with_first, dem::find_effect(second.effect),
-                          second.target.empty() ? std::vector<std::string>{} : std::vector<std::string>{second.target},
-                          scales, folder);
-      p.fitted = fitted_cases(p.extended.config, options);
-      p.fitted.space = extended_space(p.extended, with_first, run.best_sets.at(models[i].candidate->effect), options);
-      p.cases = archived_cases(p.fitted, u.case_grids);
-      pairs.push_back(std::move(p));
-    }
+  for (const auto& [i, j] : chosen) {
+    PairModel p;
+    p.first = i;
+    p.second = j;
+    p.on = {models[i].index, models[j].index};
+    const ExtendedModel& first = *models[i].extended;
+    CampaignConfig& with_first = p.with_first;
+    with_first = first.config;
+    with_first.space = extended_space(first, run.config, run.d.base_params, options);
+    const EffectCandidate& second = *models[j].candidate;
+    const fs::path folder = fs::path(options.out) / "pairs" / (models[i].candidate->effect + "+" + second.effect);
+    p.extended = extend(with_first, dem::find_effect(second.effect),
+                        second.target.empty() ? std::vector<std::string>{} : std::vector<std::string>{second.target},
+                        scales, folder);
+    p.fitted = fitted_cases(p.extended.config, options);
+    p.fitted.space = extended_space(p.extended, with_first, fit_of(models[i]), options);
+    p.cases = archived_cases(p.fitted, u.case_grids);
+    pairs.push_back(std::move(p));
+  }
   if (pairs.empty()) return {};
 
+  // Round 1 simulates each pair where both effects' fits meet: one effect's best set with the
+  // other's own parameters at its fit, and the other way round. Each later round searches the
+  // emulator within a trust region around the pair's best run so far (a box of half-width `radius`
+  // in the unit cube, doubled after a round that improved on it, halved after one that did not;
+  // a pair whose region shrinks below kLeastRadius has converged and stops): an emulator searched
+  // over the whole space proposes where it is wrong, far from every run of the model with both.
   for (int round = 1; round <= options.pair_rounds; ++round) {
-    const long wanted = static_cast<long>(pairs.size()) * static_cast<long>(models.front().cases.size());
-    if (run.within_budget(wanted) < wanted) break;
-    bool trained = false;
-    u.model_time([&] { trained = u.emulator.train(u.rows); });
-    if (!trained) break;
     std::vector<RunRequest> requests;
     std::vector<std::size_t> of_pair;
     std::vector<Eigen::VectorXd> points;
     std::vector<std::map<std::string, double>> sets;
-    for (std::size_t k = 0; k < pairs.size(); ++k) {
+    const auto request = [&](std::size_t k, const Eigen::VectorXd& x) {
       const PairModel& p = pairs[k];
-      // the first effect's fit with the second's parameters at its own fit
-      std::map<std::string, double> at_fits = run.best_sets.at(models[p.second].candidate->effect);
-      for (const auto& [name, value] : run.best_sets.at(models[p.first].candidate->effect)) at_fits[name] = value;
-      const Eigen::VectorXd fit = p.best_set.empty() ? u.layout.point(p.on, at_fits) : u.layout.point(p.on, p.best_set);
-      if (fit.size() == 0) continue;
-      std::vector<Eigen::VectorXd> taken;
-      const std::vector<Eigen::VectorXd> starts = u.starts(p.on, fit, taken);
-      double predicted = 0;
-      Eigen::VectorXd x;
-      u.model_time([&] { x = propose(u.emulator, u.layout, p.on, starts, taken, u.rng, predicted); });
-      if (x.size() == 0) continue;
       points.push_back(x);
       sets.push_back(complete_parameters(p.fitted, u.layout.parameters(p.on, x)));
       of_pair.push_back(k);
       requests.push_back({&p.extended.config, sets.back(), &run.base.residuals});
+    };
+    if (round == 1) {
+      for (std::size_t k = 0; k < pairs.size(); ++k) {
+        const PairModel& p = pairs[k];
+        const auto* first = &fit_of(models[p.first]);
+        const auto* second = &fit_of(models[p.second]);
+        const std::size_t before = points.size();
+        for (const auto& [base, other] : {std::pair{first, second}, std::pair{second, first}}) {
+          std::map<std::string, double> met = *other;           // the other's own parameters,
+          for (const auto& [name, value] : *base) met[name] = value;  // the rest as in `base`
+          const Eigen::VectorXd x = u.layout.point(p.on, met);
+          if (x.size() > 0 && (points.size() == before || (points.back() - x).norm() > kSeparation)) request(k, x);
+        }
+      }
+    } else {
+      bool trained = false;
+      u.model_time([&] { trained = u.emulator.train(u.rows); });
+      if (!trained) break;
+      for (std::size_t k = 0; k < pairs.size(); ++k) {
+        const PairModel& p = pairs[k];
+        if (p.incumbent.size() == 0 || p.radius < kLeastRadius) continue;
+        Box box = Box::whole(u.layout.dimension());
+        for (const Eigen::Index c : u.layout.coordinates(p.on)) {
+          box.lower(c) = std::max(0.0, p.incumbent(c) - p.radius);
+          box.upper(c) = std::min(1.0, p.incumbent(c) + p.radius);
+        }
+        std::vector<Eigen::VectorXd> taken;
+        const std::vector<Eigen::VectorXd> starts = u.starts(p.on, p.incumbent, taken);
+        double predicted = 0;
+        Eigen::VectorXd x;
+        u.model_time([&] { x = propose(u.emulator, u.layout, p.on, starts, taken, u.rng, predicted, box); });
+        if (x.size() > 0) request(k, x);
+      }
     }
-    if (requests.empty()) break;
+    if (requests.empty() || run.within_budget(static_cast<long>(requests.size())) < static_cast<long>(requests.size())) break;
     report.rounds = round;
     const std::vector<Evaluation> evaluations = run.runner.evaluate_all(requests);
+    std::vector<bool> improved(pairs.size(), false);
     for (std::size_t r = 0; r < evaluations.size(); ++r) {
       PairModel& p = pairs[of_pair[r]];
       ++p.simulations;
@@ -593,8 +649,14 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
       if (e.ok && std::isfinite(e.error) && e.error < p.best_error) {
         p.best_error = e.error;
         p.best_set = sets[r];
+        p.incumbent = points[r];
+        improved[of_pair[r]] = true;
       }
     }
+    if (round > 1)
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+        if (std::find(of_pair.begin(), of_pair.end(), k) != of_pair.end())
+          pairs[k].radius = improved[k] ? std::min(kLargestRadius, 2 * pairs[k].radius) : pairs[k].radius / 2;
     std::string line;
     for (const auto& p : pairs)
       line += (line.empty() ? "" : ", ") + models[p.first].candidate->effect + " + " + models[p.second].candidate->effect +
@@ -612,7 +674,8 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
     report.simulations += p.simulations;
     report.pairs.push_back({{models[p.first].candidate->effect, models[p.second].candidate->effect},
                             std::isfinite(p.best_error) ? p.best_error : PairSearch::kNaN});
-    if (p.best_error < models[p.first].candidate->error && p.best_error < models[p.second].candidate->error)
+    const auto beats = [&](const EffectCandidate& c) { return !c.tried || p.best_error < c.error; };
+    if (std::isfinite(p.best_error) && beats(*models[p.first].candidate) && beats(*models[p.second].candidate))
       order.push_back(k);
   }
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return pairs[a].best_error < pairs[b].best_error; });
@@ -620,9 +683,6 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
   std::vector<PairFit> fits;
   for (const std::size_t k : order) {
     const PairModel& p = pairs[k];
-    const std::vector<Evaluation> runs =
-        runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
-    report.simulations += static_cast<long>(runs.size());
     PairFit f;
     f.pair = k;
     f.first = models[p.first].candidate;
@@ -632,9 +692,34 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
     f.fit.effect = f.second->effect;
     f.fit.target = f.second->target;
     f.fit.tried = true;
-    f.fit.effect_parameters = f.first->effect_parameters + f.second->effect_parameters;
     f.fit.params = p.best_set;
-    if (judge_fit(f.fit, runs)) fits.push_back(std::move(f));
+    const long budget = run.within_budget(run.per_candidate);
+    if (k == order.front() && budget >= 2 * run.config.optimiser.population) {
+      // The closest pair calibrated as a candidate is, over the whole space of the model with both,
+      // its design starting at its best run: a few trust-region steps locate the pair's valley, a
+      // candidate's search budget reaches into it.
+      const fs::path folder = fs::path(options.out) / "pairs" / (f.first->effect + "+" + f.second->effect) / "calibration";
+      progress(options, "pair search: calibrating base + " + f.first->effect + " + " + f.second->effect + " (" +
+                            std::to_string(budget) + " simulations) from its best run (" +
+                            format_number(p.best_error, 3) + " N) in " + folder.string());
+      try {
+        calibrate_candidate(f.fit, f.set, p.extended, p.with_first, p.best_set, options, budget, folder, p.best_set,
+                            run.base.residuals, run.runner);
+      } catch (const std::exception& ex) {
+        f.fit.reason = std::string("its calibration failed: ") + ex.what();
+      }
+      report.simulations += f.fit.simulations;
+      report.pairs[k].calibrated = true;
+      if (!std::isfinite(f.fit.error)) continue;
+    } else {
+      const std::vector<Evaluation> runs =
+          runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
+      report.simulations += static_cast<long>(runs.size());
+      if (!judge_fit(f.fit, runs)) continue;
+    }
+    f.fit.effect_parameters = static_cast<int>(models[p.first].extended->parameter_names.size() +
+                                               models[p.second].extended->parameter_names.size());
+    fits.push_back(std::move(f));
   }
   return fits;
 }

@@ -1559,8 +1559,9 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
 
 // Where no effect passes alone and the base misses the curves (here every criterion is held short by
 // an evidence threshold no fit can pass), the pair search runs its rounds, one point per pair of
-// calibrated candidates each, counted and reported; a pair is added only where it passes, which it
-// cannot here either, and the diagnosis goes on to the tentative effect as before.
+// calibrated candidates each, counted and reported; a pair whose best run beats both effects' fits
+// is calibrated; a pair is added only where it passes, which it cannot here either, and the
+// diagnosis goes on to the tentative effect as before.
 TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
   const fs::path dir = test_support::fresh_dir("diagnose", "pairs");
   const json j = small_search_campaign(dir, "pairs");
@@ -1585,7 +1586,9 @@ TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
                            " simulations)"),
             std::string::npos)
       << d.verdict;
-  if (std::isfinite(p.criterion)) {  // a judged pair: its fit beat both effects' fits alone
+  if (std::isfinite(p.criterion)) {  // a judged pair: its best run beat both effects' fits alone
+    EXPECT_TRUE(p.pairs[0].calibrated);  // the closest pair is calibrated from its best run
+    EXPECT_TRUE(fs::exists(dir / "out" / "pairs" / "support-compliance+friction-softening" / "calibration" / "result.json"));
     EXPECT_GT(p.criterion, -o.evidence);
     EXPECT_EQ(p.rerun_errors.size(), 1u + static_cast<std::size_t>(o.scatter_runs));
     EXPECT_LT(p.error, d.error_before);

@@ -337,9 +337,10 @@ struct DiagnoseOptions {
   int union_rounds = 6;
   // --pair-rounds: rounds of the pair search (PairSearch; docs/diagnose.md, step 8) where no effect
   // passes alone and the base fit misses the curves ("no effect found"): the union search's
-  // emulator searched for every pair of calibrated candidates with both switched on, the best point
-  // of each pair simulated per round. Needs the removal check (it re-fits each effect of a pair
-  // without the other) and --max-effects other than 1. 0: none.
+  // emulator searched with both effects of a pair switched on, within a trust region around the
+  // pair's best run, the best point of each pair simulated per round; the closest pair is then
+  // calibrated. Needs the removal check (it re-fits each effect of a pair without the other) and
+  // --max-effects other than 1. 0: none.
   int pair_rounds = 8;
   // --max-effects: effects added at most. After an effect is accepted the diagnosis starts again
   // from the model with it (its fit the new base, the other effects the candidates), until no
@@ -389,11 +390,14 @@ struct UnionSearch {
 
 // The pair search (DiagnoseOptions::pair_rounds): two effects that each explain part of the residual
 // may pass only together, since each alone is searched from a base fit that compensates for both.
-// Every pair of calibrated candidates (each effect at its kept target) is searched on one emulator
-// of the curves over the base parameters and the candidates' (the union search's, its rows grown by
-// the pairs' runs) with both switched on; the pairs whose best run beats both of their effects'
-// fits are judged on the median of their re-runs, and the one of lowest criterion against the base
-// (both effects' parameters counted) is added when that criterion passes and enough resamples agree.
+// Every pair of calibrated candidates (each effect at its kept target), and the lead of the
+// residual (unexplained_lead) with every effect probed but not calibrated, is searched on one
+// emulator of the curves over the base parameters and the effects' (the union search's, its rows
+// grown by the pairs' runs) with both switched on, within a trust region around the pair's best
+// run; the pairs whose best run beats their calibrated effects' fits are judged on the median of
+// their re-runs (the closest of them calibrated first, as a candidate is, from its best run), and
+// the one of lowest criterion against the base (both effects' parameters counted) is added when
+// that criterion passes and enough resamples agree.
 struct PairSearch {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
@@ -402,6 +406,7 @@ struct PairSearch {
     double best_run_error = kNaN;      // the best of its proposals (a single run), N
     double error = kNaN;               // judged: the median of its best set's runs, N (NaN: not judged)
     double criterion = kNaN;           // judged: against the base, both effects' parameters counted
+    bool calibrated = false;           // the closest pair: calibrated as a candidate is, from its best run
   };
   int rounds = 0;                        // rounds run (0: the search did not run)
   long simulations = 0;                  // every proposal and the judged sets' re-runs
