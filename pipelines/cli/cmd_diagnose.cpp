@@ -82,7 +82,8 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--continued-simulations", o.continued_simulations,
                   "Simulations of a further search for an accepted effect whose fit stays above the noise and scatter, "
-                  "then, while no fit explains the curves, for each contender (-1 = a candidate's budget, 0 = none)")
+                  "then, while no fit explains the curves, for each contender, and for the pair search's calibrated pair "
+                  "(-1 = a candidate's budget, 0 = none)")
       ->capture_default_str();
   sub->add_option("--union-rounds", o.union_rounds,
                   "Rounds of the union search after the candidates' calibrations: one emulator of the curves over "

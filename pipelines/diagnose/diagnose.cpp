@@ -220,7 +220,7 @@ json PairSearch::to_json() const {
   json tried = json::array();
   for (const auto& p : pairs)
     tried.push_back({{"effects", p.effects}, {"best_run_error", finite_or_null(p.best_run_error)},
-                     {"calibrated", p.calibrated}, {"error", finite_or_null(p.error)},
+                     {"calibrated", p.calibrated}, {"continued", p.continued}, {"error", finite_or_null(p.error)},
                      {"criterion", finite_or_null(p.criterion)}});
   return {{"rounds", rounds}, {"simulations", simulations}, {"pairs", tried}, {"effects", effects},
           {"params", params_json(params)}, {"rerun_errors", rerun_errors}, {"error", finite_or_null(error)},

@@ -708,8 +708,53 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
       } catch (const std::exception& ex) {
         f.fit.reason = std::string("its calibration failed: ") + ex.what();
       }
-      report.simulations += f.fit.simulations;
       report.pairs[k].calibrated = true;
+      // The calibration minimises the campaign's objective, the judge is the force error: the best
+      // run is judged too where the calibration's fit is not below it, and the lower fit kept.
+      if (!(f.fit.error <= p.best_error)) {
+        EffectCandidate at_best = f.fit;
+        at_best.params = p.best_set;
+        at_best.reason.clear();
+        const std::vector<Evaluation> runs =
+            runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
+        f.fit.simulations += static_cast<long>(runs.size());
+        if (judge_fit(at_best, runs) && !(at_best.error >= f.fit.error)) {
+          at_best.simulations = f.fit.simulations;
+          f.fit = std::move(at_best);
+          f.set = p.best_set;
+        }
+      }
+      // Above the noise and scatter, its search continued once from its fit with another seed, as a
+      // lead's is (DiagnoseOptions::continued_simulations); the lower fit kept.
+      const long further = run.within_budget(options.continued_simulations < 0 ? run.per_candidate
+                                                                               : options.continued_simulations);
+      if (f.fit.error > options.noise_level_ratio * floor_of(run.d, options) &&
+          further >= 2 * run.config.optimiser.population) {
+        const fs::path continued = folder.parent_path() / "continued";
+        progress(options, "pair search: " + f.first->effect + " + " + f.second->effect + " stays at " +
+                              format_number(f.fit.error, 3) + " N: its search continued (" + std::to_string(further) +
+                              " simulations) in " + continued.string());
+        EffectCandidate next = f.fit;
+        next.simulations = 0;
+        next.error = EffectCandidate::kNaN;
+        std::map<std::string, double> next_set;
+        ExtendedModel reseeded = p.extended;
+        reseeded.config.optimiser.seed += 1;
+        try {
+          calibrate_candidate(next, next_set, reseeded, p.with_first, f.set, options, further, continued, f.set,
+                              run.base.residuals, run.runner);
+        } catch (const std::exception& ex) {
+          progress(options, "the continued search of the pair failed: " + std::string(ex.what()));
+        }
+        report.pairs[k].continued = true;
+        const long simulations = f.fit.simulations + next.simulations;
+        if (next.error < f.fit.error) {
+          f.fit = std::move(next);
+          f.set = next_set;
+        }
+        f.fit.simulations = simulations;
+      }
+      report.simulations += f.fit.simulations;
       if (!std::isfinite(f.fit.error)) continue;
     } else {
       const std::vector<Evaluation> runs =

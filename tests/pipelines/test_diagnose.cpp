@@ -1568,7 +1568,7 @@ TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
   DiagnoseOptions o = small_search_options(dir / "out", {"support-compliance", "friction-softening"});
   o.candidates = 2;
   o.union_rounds = 0;
-  o.continued_simulations = 0;
+  o.continued_simulations = 8;  // the lead's search and the calibrated pair's continued where above the floor
   o.evidence = 1e6;
   o.pair_rounds = 2;
   o.max_effects = 2;
@@ -1588,7 +1588,9 @@ TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
       << d.verdict;
   if (std::isfinite(p.criterion)) {  // a judged pair: its best run beat both effects' fits alone
     EXPECT_TRUE(p.pairs[0].calibrated);  // the closest pair is calibrated from its best run
-    EXPECT_TRUE(fs::exists(dir / "out" / "pairs" / "support-compliance+friction-softening" / "calibration" / "result.json"));
+    const fs::path pair_dir = dir / "out" / "pairs" / "support-compliance+friction-softening";
+    EXPECT_TRUE(fs::exists(pair_dir / "calibration" / "result.json"));
+    EXPECT_EQ(p.pairs[0].continued, fs::exists(pair_dir / "continued" / "result.json"));
     EXPECT_GT(p.criterion, -o.evidence);
     EXPECT_EQ(p.rerun_errors.size(), 1u + static_cast<std::size_t>(o.scatter_runs));
     EXPECT_LT(p.error, d.error_before);

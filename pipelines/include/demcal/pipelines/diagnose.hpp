@@ -327,7 +327,8 @@ struct DiagnoseOptions {
   bool tentative_effect = true;
   // --continued-simulations: a further search (ContinuedSearch) of each fit left above the floor
   // where the selection leaves the residual unexplained: the accepted effect, then, while no fit
-  // explains the curves, the contenders. -1: a candidate's budget; 0: none.
+  // explains the curves, the contenders; and the pair search's calibrated pair (PairSearch).
+  // -1: a candidate's budget; 0: none.
   long continued_simulations = -1;
   // --union-rounds: rounds of the union search after the candidates' calibrations (UnionSearch;
   // docs/diagnose.md, step 4): one emulator of the curves over the base parameters and every
@@ -407,6 +408,7 @@ struct PairSearch {
     double error = kNaN;               // judged: the median of its best set's runs, N (NaN: not judged)
     double criterion = kNaN;           // judged: against the base, both effects' parameters counted
     bool calibrated = false;           // the closest pair: calibrated as a candidate is, from its best run
+    bool continued = false;            // the calibrated pair's search continued, its fit above the floor
   };
   int rounds = 0;                        // rounds run (0: the search did not run)
   long simulations = 0;                  // every proposal and the judged sets' re-runs
