@@ -209,6 +209,16 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
                          CaseRunner& runner, const std::vector<std::map<std::string, double>>& further_base = {},
                          std::vector<ParameterSet>* searched = nullptr);
 
+// A fit's search continued once (DiagnoseOptions::continued_simulations): `model` with its seed + 1,
+// `budget` simulations from `set` in `folder`, on the base model `config` at `base_params`. The
+// lower of `fit` and the new fit is kept in `fit` and `set`, `fit.simulations` counting both;
+// `label` names the fit in the line of a failed search. Returns the further search's record.
+ContinuedSearch continue_search(EffectCandidate& fit, std::map<std::string, double>& set, ExtendedModel model,
+                                const CampaignConfig& config, const std::map<std::string, double>& base_params,
+                                const DiagnoseOptions& options, long budget, const std::filesystem::path& folder,
+                                const std::vector<ChannelResidual>& base_residuals, CaseRunner& runner,
+                                const std::string& label, std::vector<ParameterSet>* searched = nullptr);
+
 // A fit's fields of `c` (rerun_errors, residuals, error, rms, held-out errors) from a set's run and
 // re-runs (runs_with_reruns), judged on the run of median error; false, with `c.reason`, when the
 // first run failed.
@@ -283,6 +293,8 @@ struct DiagnosisRun {
 
   // `wanted` simulations, within a total budget: room is left for a best set's run and re-runs.
   long within_budget(long wanted) const;
+  // A continued search's simulations (DiagnoseOptions::continued_simulations; -1: a candidate's).
+  long continued_budget() const { return options.continued_simulations < 0 ? per_candidate : options.continued_simulations; }
 };
 
 void fit_base(DiagnosisRun& run);                      // 1. base_fit.cpp

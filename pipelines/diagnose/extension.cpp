@@ -236,6 +236,32 @@ bool calibrate_candidate(EffectCandidate& c, std::map<std::string, double>& best
   return true;
 }
 
+ContinuedSearch continue_search(EffectCandidate& fit, std::map<std::string, double>& set, ExtendedModel model,
+                                const CampaignConfig& config, const std::map<std::string, double>& base_params,
+                                const DiagnoseOptions& options, long budget, const fs::path& folder,
+                                const std::vector<ChannelResidual>& base_residuals, CaseRunner& runner,
+                                const std::string& label, std::vector<ParameterSet>* searched) {
+  EffectCandidate next = fit;
+  next.simulations = 0;
+  next.error = EffectCandidate::kNaN;  // stays NaN when the further search fails
+  std::map<std::string, double> next_set;
+  model.config.optimiser.seed += 1;
+  try {
+    calibrate_candidate(next, next_set, model, config, base_params, options, budget, folder, set, base_residuals, runner,
+                        {}, searched);
+  } catch (const std::exception& ex) {
+    progress(options, "the continued search of " + label + " failed: " + ex.what());
+  }
+  ContinuedSearch continued{next.simulations, fit.error, next.error, next.error < fit.error};
+  const long simulations = fit.simulations + continued.simulations;
+  if (continued.kept) {
+    fit = std::move(next);
+    set = std::move(next_set);
+  }
+  fit.simulations = simulations;
+  return continued;
+}
+
 bool judge_fit(EffectCandidate& c, const std::vector<Evaluation>& runs) {
   if (!runs.front().ok) {
     c.reason = "its best set cannot be re-simulated: " + runs.front().message;

@@ -364,26 +364,10 @@ void search_further(DiagnosisRun& run, const std::string& name, long budget, dou
   progress(options, c.effect + "'s fit stays above the noise and scatter (" + format_number(c.error, 3) + " against " +
                         format_number(explained, 3) + " N): its search continued (" + std::to_string(budget) +
                         " simulations) in " + folder.string());
-  EffectCandidate next = c;
-  next.simulations = 0;
-  next.error = EffectCandidate::kNaN;  // stays NaN when the further search fails
-  std::map<std::string, double> next_set;
-  ExtendedModel further = run.models.at(c.effect);
-  further.config.optimiser.seed += 1;
   options.progress = options.progress && !quiet;
-  try {
-    calibrate_candidate(next, next_set, further, run.config, run.d.base_params, options, budget, folder,
-                        run.best_sets.at(c.effect), run.base.residuals, run.runner, {}, &run.searched.at(c.effect));
-  } catch (const std::exception& ex) {
-    progress(options, "the continued search of " + c.effect + " failed: " + ex.what());
-  }
-  ContinuedSearch continued{next.simulations, c.error, next.error, next.error < c.error};
-  const long simulations = c.simulations + continued.simulations;
-  if (continued.kept) {
-    c = std::move(next);
-    run.best_sets.at(c.effect) = next_set;
-  }
-  c.simulations = simulations;
+  const ContinuedSearch continued =
+      continue_search(c, run.best_sets.at(c.effect), run.models.at(c.effect), run.config, run.d.base_params, options,
+                      budget, folder, run.base.residuals, run.runner, c.effect, &run.searched.at(c.effect));
   c.continued = continued;
   if (quiet)
     progress(run.options, c.effect + "'s continued search: error " + format_number(continued.error_found, 3) + " N after " +
@@ -401,7 +385,7 @@ void select_and_search_further(DiagnosisRun& run) {
   // A search continued while the selection leaves the residual above the floor: the search, not
   // the effect, may be what leaves the error there (a stiffness whose truth is a narrow valley).
   const double explained = options.noise_level_ratio * floor_of(d, options);
-  const long continued_budget = options.continued_simulations < 0 ? run.per_candidate : options.continued_simulations;
+  const long continued_budget = run.continued_budget();
   std::set<std::string> searched_further;
   while (continued_budget > 0) {
     std::vector<std::string> names = candidates_to_search_further(d, options);

@@ -724,35 +724,18 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
           f.set = p.best_set;
         }
       }
-      // Above the noise and scatter, its search continued once from its fit with another seed, as a
-      // lead's is (DiagnoseOptions::continued_simulations); the lower fit kept.
-      const long further = run.within_budget(options.continued_simulations < 0 ? run.per_candidate
-                                                                               : options.continued_simulations);
+      // Above the noise and scatter, its search continued once from its fit, as a lead's is.
+      const long further = run.within_budget(run.continued_budget());
       if (f.fit.error > options.noise_level_ratio * floor_of(run.d, options) &&
           further >= 2 * run.config.optimiser.population) {
+        const std::string pair = f.first->effect + " + " + f.second->effect;
         const fs::path continued = folder.parent_path() / "continued";
-        progress(options, "pair search: " + f.first->effect + " + " + f.second->effect + " stays at " +
-                              format_number(f.fit.error, 3) + " N: its search continued (" + std::to_string(further) +
-                              " simulations) in " + continued.string());
-        EffectCandidate next = f.fit;
-        next.simulations = 0;
-        next.error = EffectCandidate::kNaN;
-        std::map<std::string, double> next_set;
-        ExtendedModel reseeded = p.extended;
-        reseeded.config.optimiser.seed += 1;
-        try {
-          calibrate_candidate(next, next_set, reseeded, p.with_first, f.set, options, further, continued, f.set,
-                              run.base.residuals, run.runner);
-        } catch (const std::exception& ex) {
-          progress(options, "the continued search of the pair failed: " + std::string(ex.what()));
-        }
+        progress(options, "pair search: " + pair + " stays at " + format_number(f.fit.error, 3) +
+                              " N: its search continued (" + std::to_string(further) + " simulations) in " +
+                              continued.string());
+        continue_search(f.fit, f.set, p.extended, p.with_first, f.set, options, further, continued, run.base.residuals,
+                        run.runner, pair);
         report.pairs[k].continued = true;
-        const long simulations = f.fit.simulations + next.simulations;
-        if (next.error < f.fit.error) {
-          f.fit = std::move(next);
-          f.set = next_set;
-        }
-        f.fit.simulations = simulations;
       }
       report.simulations += f.fit.simulations;
       if (!std::isfinite(f.fit.error)) continue;
