@@ -219,7 +219,7 @@ json UnionSearch::to_json() const {
 json PairSearch::to_json() const {
   json tried = json::array();
   for (const auto& p : pairs)
-    tried.push_back({{"effects", p.effects}, {"best_run_error", finite_or_null(p.best_run_error)},
+    tried.push_back({{"effects", p.effects}, {"targets", p.targets}, {"best_run_error", finite_or_null(p.best_run_error)},
                      {"calibrated", p.calibrated}, {"continued", p.continued}, {"error", finite_or_null(p.error)},
                      {"criterion", finite_or_null(p.criterion)}});
   return {{"rounds", rounds}, {"simulations", simulations}, {"pairs", tried}, {"effects", effects},

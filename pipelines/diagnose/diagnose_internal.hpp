@@ -20,6 +20,7 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <string>
@@ -254,6 +255,7 @@ struct ProbedTarget {
   EffectCandidate candidate;
   ExtendedModel model;
   std::map<std::string, double> warm;
+  double warm_error = std::numeric_limits<double>::infinity();  // its run's force error, N
 };
 
 // What the stages of one diagnosis share: run_diagnosis makes it, each stage reads what the stages
@@ -285,6 +287,9 @@ struct DiagnosisRun {
   std::map<std::string, ExtendedModel> models;                      // effect -> its best-signature extension
   std::map<std::string, std::map<std::string, double>> warm_starts;  // effect -> its best probe's set
   std::map<std::string, std::vector<ProbedTarget>> close_targets;    // effect -> other targets calibrated too
+  // effect -> every target of a targeted effect whose probes ran, the best included: the pair
+  // search's other targets (search_pairs)
+  std::map<std::string, std::vector<ProbedTarget>> probed_targets;
 
   // 4-6. calibrations and selection
   std::map<std::string, std::map<std::string, double>> best_sets;  // effect -> its fit's complete set
@@ -310,15 +315,19 @@ void calibrate_candidates(DiagnosisRun& run);          // 4. extension.cpp
 void search_union(DiagnosisRun& run);
 // 8a. The pair search (DiagnoseOptions::pair_rounds; union_search.cpp), where no effect passes
 // alone: every pair of calibrated candidates, and the lead (unexplained_lead) with every effect
-// probed but not calibrated; the union search's emulator searched with both switched on within a
-// trust region around each pair's best run, its best point simulated per round (into
-// run.d.pair_search); the pairs whose best run beats their calibrated effects' fits (at most three,
-// lowest first) judged on the median of their runs, the closest after a candidate's calibration
-// from its best run.
+// probed but not calibrated; with the other targets of each effect (DiagnosisRun::probed_targets,
+// the kOtherTargets whose best probes came closest) paired with the lead, and the lead's effect at
+// its other targets paired with every effect at its own; the union search's emulator searched with
+// both switched on within a trust region around each pair's best run, its best point simulated per
+// round (into run.d.pair_search); the pairs whose best run beats their calibrated effects' fits (at
+// most three, lowest first) judged on the median of their runs, the closest after a candidate's
+// calibration from its best run.
 struct PairFit {
   std::size_t pair = 0;                    // its entry of PairSearch::pairs
   const EffectCandidate* first = nullptr;  // the candidates of its two effects, in the candidates' order
   const EffectCandidate* second = nullptr;
+  const ExtendedModel* first_model = nullptr;   // each effect alone at its target
+  const ExtendedModel* second_model = nullptr;
   ExtendedModel model;                     // the base model with both effects
   std::map<std::string, double> set;       // its best set, complete
   EffectCandidate fit;                     // judge_fit's fields; effect and target the second's,

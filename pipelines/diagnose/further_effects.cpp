@@ -263,13 +263,17 @@ bool add_pair(DiagnosisRun& run) {
     const auto closest = std::min_element(report.pairs.begin(), report.pairs.end(), [](const auto& a, const auto& b) {
       return !(b.best_run_error <= a.best_run_error);  // NaN last
     });
+    const auto named = [&](std::size_t k) {
+      return closest->effects[k] + (closest->targets[k].empty() ? "" : " at " + closest->targets[k]);
+    };
     add_note(d, searched + (fits.empty() ? "no pair's best run fitted better than both of its effects alone (the closest, " +
-                                               closest->effects[0] + " and " + closest->effects[1] + ", " +
+                                               named(0) + " and " + named(1) + ", " +
                                                format_number(closest->best_run_error, 3) + " N)."
                                          : "no pair's fit lowered the error without spoiling the held-out data."));
     return false;
   }
-  const std::string pair_text = best->first->effect + " and " + best->second->effect;
+  const auto named = [](const EffectCandidate& c) { return c.effect + (c.target.empty() ? "" : " at " + c.target); };
+  const std::string pair_text = named(*best->first) + " and " + named(*best->second);
   report.effects = {best->first->effect, best->second->effect};
   report.params = best->set;
   report.rerun_errors = best->fit.rerun_errors;
@@ -296,18 +300,20 @@ bool add_pair(DiagnosisRun& run) {
   }
   // each effect at the pair's fit, bounded in the model with both (the others re-fitted)
   std::vector<EffectCandidate> members = {*best->first, *best->second};
+  const std::vector<const ExtendedModel*> own_models = {best->first_model, best->second_model};
   const dem::ResponseScales scales{std::isfinite(d.peak_normal_stress) ? d.peak_normal_stress : 0,
                                    std::isfinite(d.start_normal_stress) ? d.start_normal_stress : 0};
   std::vector<ModelEffect> effects;
-  for (auto& m : members) {
-    m.effect_parameters = static_cast<int>(run.models.at(m.effect).parameter_names.size());
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    EffectCandidate& m = members[k];
+    const ExtendedModel& own = *own_models[k];
+    m.effect_parameters = static_cast<int>(own.parameter_names.size());
     m.params = best->set;
     m.residuals = best->fit.residuals;
     m.error = best->fit.error;
     m.bounds.clear();
     if (o.parameter_bounds) {
       ExtendedModel model = best->model;
-      const ExtendedModel& own = run.models.at(m.effect);
       model.parameter_names = own.parameter_names;
       model.parameters = own.parameters;
       progress(o, "checking how tightly the data pin the parameters of " + m.effect + " in the model with " + pair_text);

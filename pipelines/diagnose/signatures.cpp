@@ -286,6 +286,10 @@ void choose_target(DiagnosisRun& run, const dem::Effect& effect, std::vector<Tar
       continue;
     }
     if (t.signed_) probed_targets.push_back(t.probed);
+    if (t.signed_ && !t.probed.candidate.target.empty()) {
+      run.probed_targets[effect.name].push_back(t.probed);
+      run.probed_targets[effect.name].back().warm_error = t.warm_error;
+    }
     if (t.probed.candidate.signature_score > best_target.signature_score) {
       best_target = t.probed.candidate;
       run.models[effect.name] = t.probed.model;

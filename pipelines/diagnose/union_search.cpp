@@ -147,6 +147,9 @@ constexpr double kFirstStep = 0.125, kLastStep = 1.0 / 512;
 // A proposal closer than this (unit-cube distance over the model's coordinates) to a run of the
 // model is not simulated again: the next best is taken.
 constexpr double kSeparation = 1e-3;
+// Other targets of an effect that the pair search takes (DiagnosisRun::probed_targets), those whose
+// best probes came closest: each adds a pair per partner, and a joint gap has eight targets.
+constexpr std::size_t kOtherTargets = 2;
 
 // A model of the union: its calibration space and cases (the archive's keys), and the model whose
 // config simulates it (every case, the held-out ones included).
@@ -154,6 +157,9 @@ struct UnionModel {
   int index = -1;                           // UnionLayout's (-1: the base)
   EffectCandidate* candidate = nullptr;     // null for the base
   const ExtendedModel* extended = nullptr;  // null for the base
+  // Another target of a candidate's effect (the pair search's, DiagnosisRun::probed_targets): its
+  // best probe's set; null for a candidate at its own target, whose fit is its calibration's.
+  const std::map<std::string, double>* other_target_fit = nullptr;
   CampaignConfig fitted;                    // the calibration's campaign: fitted cases, its space
   std::vector<ArchivedCase> cases;
 };
@@ -296,7 +302,8 @@ Eigen::VectorXd fitted_outputs(const Evaluation& e, const CampaignConfig& fitted
 // archived run of those models on this step's objective grid) and its emulator.
 struct Union {
   // `untried`: the effects probed in step 3 and not calibrated join too (at their best-signature
-  // target, with no run yet), after the calibrated ones.
+  // target, with no run yet), after the calibrated ones, then every other probed target of each
+  // effect (DiagnosisRun::probed_targets).
   Union(DiagnosisRun& run, bool untried);
 
   CampaignConfig base_fitted;
@@ -358,10 +365,11 @@ Union::Union(DiagnosisRun& run, bool untried)
   models.resize(1);
   models.front().fitted = base_fitted;
   models.front().cases = archived_cases(base_fitted, case_grids);
-  const auto add = [&](EffectCandidate& c) {
+  const auto add = [&](EffectCandidate& c, const ExtendedModel& extended, const std::map<std::string, double>* other_target_fit) {
     UnionModel m;
     m.candidate = &c;
-    m.extended = &run.models.at(c.effect);
+    m.extended = &extended;
+    m.other_target_fit = other_target_fit;
     m.fitted = fitted_cases(m.extended->config, run.options);
     m.fitted.space = extended_space(*m.extended, run.config, run.d.base_params, run.options);
     m.cases = archived_cases(m.fitted, case_grids);
@@ -369,10 +377,25 @@ Union::Union(DiagnosisRun& run, bool untried)
     models.push_back(std::move(m));
   };
   for (auto& c : run.d.candidates)
-    if (c.tried && std::isfinite(c.error) && run.models.count(c.effect)) add(c);
-  if (untried)
+    if (c.tried && std::isfinite(c.error) && run.models.count(c.effect)) add(c, run.models.at(c.effect), nullptr);
+  if (untried) {
     for (auto& c : run.d.candidates)
-      if (!c.tried && run.models.count(c.effect) && run.warm_starts.count(c.effect)) add(c);
+      if (!c.tried && run.models.count(c.effect) && run.warm_starts.count(c.effect)) add(c, run.models.at(c.effect), nullptr);
+    // other probed targets of their effects, those whose best probes came closest first: a target
+    // was chosen on the base fit, which may compensate for the effect sought
+    const std::size_t candidates = models.size();
+    for (std::size_t i = 1; i < candidates; ++i) {
+      const auto probed = run.probed_targets.find(models[i].candidate->effect);
+      if (probed == run.probed_targets.end()) continue;
+      std::vector<ProbedTarget*> others;
+      for (auto& t : probed->second)
+        if (t.candidate.target != models[i].candidate->target) others.push_back(&t);
+      std::stable_sort(others.begin(), others.end(),
+                       [](const ProbedTarget* a, const ProbedTarget* b) { return a->warm_error < b->warm_error; });
+      if (others.size() > kOtherTargets) others.resize(kOtherTargets);
+      for (ProbedTarget* t : others) add(t->candidate, t->model, &t->warm);
+    }
+  }
   // Every archived run of the models, on the grids of this step's objective: a further step's base
   // model ran in the steps before it, whose archives come first.
   std::set<std::pair<int, std::vector<double>>> seen;
@@ -535,11 +558,11 @@ struct PairModel {
   ExtendedModel extended;
   CampaignConfig fitted;
   std::vector<ArchivedCase> cases;
+  fs::path folder;  // its runs' and calibrations' folder
   double best_error = std::numeric_limits<double>::infinity();
   std::map<std::string, double> best_set;
   Eigen::VectorXd incumbent;  // the union point of best_set (empty: no run yet)
   double radius = kFirstRadius;
-  long simulations = 0;
 };
 
 }  // namespace
@@ -548,20 +571,43 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
   if (run.options.pair_rounds <= 0) return {};
   const DiagnoseOptions& options = run.options;
   PairSearch& report = run.d.pair_search;
+  const long simulations_before = run.runner.simulations();
   Union u(run, true);
   const auto& models = u.models;
-  // An effect's fit: its calibration's best set, or for one not calibrated its best probe's set.
+  // An effect's fit: its calibration's best set, or for one not calibrated (or at another target)
+  // its best probe's set.
   const auto fit_of = [&](const UnionModel& m) -> const std::map<std::string, double>& {
+    if (m.other_target_fit != nullptr) return *m.other_target_fit;
     const auto found = run.best_sets.find(m.candidate->effect);
     return found != run.best_sets.end() ? found->second : run.warm_starts.at(m.candidate->effect);
   };
+  // A model's name in the progress lines and its pair's folder: the effect, and the target where
+  // it is not the candidate's own.
+  const auto name_of = [&](const UnionModel& m) {
+    return m.candidate->effect + (m.other_target_fit != nullptr ? " at " + m.candidate->target : "");
+  };
+  const auto folder_of = [&](const UnionModel& m) {
+    return m.candidate->effect + (m.other_target_fit != nullptr ? "-at-" + file_safe(m.candidate->target) : "");
+  };
   // Every pair of calibrated candidates, and the lead of the residual (the fit a tentative effect
-  // would start from) with every effect probed but not calibrated: the partner it would look for.
+  // would start from) with every effect probed but not calibrated and every other target: the
+  // partner it would look for. The lead's target was chosen on a base fit that compensates, so its
+  // effect at its other targets is paired with every effect at its own too. Two targets of one
+  // effect are not paired.
   std::vector<std::pair<std::size_t, std::size_t>> chosen;
   const EffectCandidate* lead = unexplained_lead(run.d, options);
+  const auto own_target = [&](std::size_t i) { return models[i].other_target_fit == nullptr; };
+  const auto lead_elsewhere = [&](std::size_t i) {
+    return lead != nullptr && !own_target(i) && models[i].candidate->effect == lead->effect;
+  };
   for (std::size_t i = 1; i < models.size(); ++i)
-    for (std::size_t j = i + 1; j < models.size(); ++j)
-      if (models[j].candidate->tried || models[i].candidate == lead) chosen.emplace_back(i, j);
+    for (std::size_t j = i + 1; j < models.size(); ++j) {
+      if (models[i].candidate->effect == models[j].candidate->effect) continue;
+      const bool calibrated = models[i].candidate->tried && models[j].candidate->tried;
+      const bool with_lead = models[i].candidate == lead || models[j].candidate == lead ||
+                             (lead_elsewhere(i) && own_target(j)) || (lead_elsewhere(j) && own_target(i));
+      if (calibrated || with_lead) chosen.emplace_back(i, j);
+    }
   std::vector<PairModel> pairs;
   const dem::ResponseScales scales{std::isfinite(run.d.peak_normal_stress) ? run.d.peak_normal_stress : 0,
                                    std::isfinite(run.d.start_normal_stress) ? run.d.start_normal_stress : 0};
@@ -575,10 +621,11 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
     with_first = first.config;
     with_first.space = extended_space(first, run.config, run.d.base_params, options);
     const EffectCandidate& second = *models[j].candidate;
-    const fs::path folder = fs::path(options.out) / "pairs" / (models[i].candidate->effect + "+" + second.effect);
+    const fs::path folder = fs::path(options.out) / "pairs" / (folder_of(models[i]) + "+" + folder_of(models[j]));
     p.extended = extend(with_first, dem::find_effect(second.effect),
                         second.target.empty() ? std::vector<std::string>{} : std::vector<std::string>{second.target},
                         scales, folder);
+    p.folder = folder;
     p.fitted = fitted_cases(p.extended.config, options);
     p.fitted.space = extended_space(p.extended, with_first, fit_of(models[i]), options);
     p.cases = archived_cases(p.fitted, u.case_grids);
@@ -643,7 +690,6 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
     std::vector<bool> improved(pairs.size(), false);
     for (std::size_t r = 0; r < evaluations.size(); ++r) {
       PairModel& p = pairs[of_pair[r]];
-      ++p.simulations;
       const Evaluation& e = evaluations[r];
       u.add_row(e, points[r], p.on, p.fitted, p.cases);
       if (e.ok && std::isfinite(e.error) && e.error < p.best_error) {
@@ -659,8 +705,8 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
           pairs[k].radius = improved[k] ? std::min(kLargestRadius, 2 * pairs[k].radius) : pairs[k].radius / 2;
     std::string line;
     for (const auto& p : pairs)
-      line += (line.empty() ? "" : ", ") + models[p.first].candidate->effect + " + " + models[p.second].candidate->effect +
-              " " + format_number(p.best_error, 3) + " N";
+      line += (line.empty() ? "" : ", ") + name_of(models[p.first]) + " + " + name_of(models[p.second]) + " " +
+              format_number(p.best_error, 3) + " N";
     progress(options, "pair search, round " + std::to_string(round) + " (an emulator of " + std::to_string(u.rows.size()) +
                           " runs): best so far " + line);
   }
@@ -671,8 +717,8 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
   std::vector<std::size_t> order;
   for (std::size_t k = 0; k < pairs.size(); ++k) {
     const PairModel& p = pairs[k];
-    report.simulations += p.simulations;
     report.pairs.push_back({{models[p.first].candidate->effect, models[p.second].candidate->effect},
+                            {models[p.first].candidate->target, models[p.second].candidate->target},
                             std::isfinite(p.best_error) ? p.best_error : PairSearch::kNaN});
     const auto beats = [&](const EffectCandidate& c) { return !c.tried || p.best_error < c.error; };
     if (std::isfinite(p.best_error) && beats(*models[p.first].candidate) && beats(*models[p.second].candidate))
@@ -687,6 +733,8 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
     f.pair = k;
     f.first = models[p.first].candidate;
     f.second = models[p.second].candidate;
+    f.first_model = models[p.first].extended;
+    f.second_model = models[p.second].extended;
     f.model = p.extended;
     f.set = p.best_set;
     f.fit.effect = f.second->effect;
@@ -698,8 +746,9 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
       // The closest pair calibrated as a candidate is, over the whole space of the model with both,
       // its design starting at its best run: a few trust-region steps locate the pair's valley, a
       // candidate's search budget reaches into it.
-      const fs::path folder = fs::path(options.out) / "pairs" / (f.first->effect + "+" + f.second->effect) / "calibration";
-      progress(options, "pair search: calibrating base + " + f.first->effect + " + " + f.second->effect + " (" +
+      const std::string pair = name_of(models[p.first]) + " + " + name_of(models[p.second]);
+      const fs::path folder = p.folder / "calibration";
+      progress(options, "pair search: calibrating base + " + pair + " (" +
                             std::to_string(budget) + " simulations) from its best run (" +
                             format_number(p.best_error, 3) + " N) in " + folder.string());
       try {
@@ -728,7 +777,6 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
       const long further = run.within_budget(run.continued_budget());
       if (f.fit.error > options.noise_level_ratio * floor_of(run.d, options) &&
           further >= 2 * run.config.optimiser.population) {
-        const std::string pair = f.first->effect + " + " + f.second->effect;
         const fs::path continued = folder.parent_path() / "continued";
         progress(options, "pair search: " + pair + " stays at " + format_number(f.fit.error, 3) +
                               " N: its search continued (" + std::to_string(further) + " simulations) in " +
@@ -737,18 +785,17 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
                         run.runner, pair);
         report.pairs[k].continued = true;
       }
-      report.simulations += f.fit.simulations;
       if (!std::isfinite(f.fit.error)) continue;
     } else {
       const std::vector<Evaluation> runs =
           runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
-      report.simulations += static_cast<long>(runs.size());
       if (!judge_fit(f.fit, runs)) continue;
     }
-    f.fit.effect_parameters = static_cast<int>(models[p.first].extended->parameter_names.size() +
-                                               models[p.second].extended->parameter_names.size());
+    f.fit.effect_parameters =
+        static_cast<int>(f.first_model->parameter_names.size() + f.second_model->parameter_names.size());
     fits.push_back(std::move(f));
   }
+  report.simulations = run.runner.simulations() - simulations_before;  // the calibrations' re-runs included
   return fits;
 }
 

@@ -1558,8 +1558,10 @@ TEST(DiagnoseLoop, EveryStageRunsOnASmallSearch) {
 }
 
 // Where no effect passes alone and the base misses the curves (here every criterion is held short by
-// an evidence threshold no fit can pass), the pair search runs its rounds, one point per pair of
-// calibrated candidates each, counted and reported; a pair whose best run beats both effects' fits
+// an evidence threshold no fit can pass), the pair search runs its rounds, one point per pair each,
+// counted and reported: the two calibrated candidates, and the support at the abutment its
+// candidate does not sit at with the softening (the lead's effect at its other target, or the
+// lead with the other target of the other effect); a pair whose best run beats both effects' fits
 // is calibrated; a pair is added only where it passes, which it cannot here either, and the
 // diagnosis goes on to the tentative effect as before.
 TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
@@ -1577,20 +1579,32 @@ TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
   ASSERT_EQ(d.outcome, DiagnosisOutcome::unexplained) << d.verdict;  // the soft abutment misses by far more than the noise
   const PairSearch& p = d.pair_search;
   EXPECT_EQ(p.rounds, 2);
-  ASSERT_EQ(p.pairs.size(), 1u);
+  const auto support = std::find_if(d.candidates.begin(), d.candidates.end(),
+                                     [](const EffectCandidate& c) { return c.effect == "support-compliance"; });
+  ASSERT_NE(support, d.candidates.end());
+  ASSERT_TRUE(support->target == "abutment_left" || support->target == "abutment_right") << support->target;
+  const std::string other_abutment = support->target == "abutment_left" ? "abutment_right" : "abutment_left";
+  ASSERT_EQ(p.pairs.size(), 2u);
   EXPECT_EQ(p.pairs[0].effects, (std::vector<std::string>{"support-compliance", "friction-softening"}));
-  EXPECT_GE(p.simulations, 2);
+  EXPECT_EQ(p.pairs[0].targets, (std::vector<std::string>{support->target, ""}));
+  EXPECT_EQ(p.pairs[1].effects, (std::vector<std::string>{"friction-softening", "support-compliance"}));
+  EXPECT_EQ(p.pairs[1].targets, (std::vector<std::string>{"", other_abutment}));
+  EXPECT_GE(p.simulations, 4);
   EXPECT_FALSE(p.accepted);
   EXPECT_TRUE(d.chosen.empty());
-  EXPECT_NE(d.verdict.find("Pairs of effects searched together (1 pair, 2 rounds, " + std::to_string(p.simulations) +
+  EXPECT_NE(d.verdict.find("Pairs of effects searched together (2 pairs, 2 rounds, " + std::to_string(p.simulations) +
                            " simulations)"),
             std::string::npos)
       << d.verdict;
+  const fs::path pair_dirs[] = {dir / "out" / "pairs" / "support-compliance+friction-softening",
+                                dir / "out" / "pairs" / ("friction-softening+support-compliance-at-" + other_abutment)};
   if (std::isfinite(p.criterion)) {  // a judged pair: its best run beat both effects' fits alone
-    EXPECT_TRUE(p.pairs[0].calibrated);  // the closest pair is calibrated from its best run
-    const fs::path pair_dir = dir / "out" / "pairs" / "support-compliance+friction-softening";
-    EXPECT_TRUE(fs::exists(pair_dir / "calibration" / "result.json"));
-    EXPECT_EQ(p.pairs[0].continued, fs::exists(pair_dir / "continued" / "result.json"));
+    // the closest pair is calibrated from its best run
+    EXPECT_EQ(std::count_if(p.pairs.begin(), p.pairs.end(), [](const PairSearch::Pair& x) { return x.calibrated; }), 1);
+    for (std::size_t k = 0; k < 2; ++k) {
+      EXPECT_EQ(p.pairs[k].calibrated, fs::exists(pair_dirs[k] / "calibration" / "result.json")) << pair_dirs[k];
+      EXPECT_EQ(p.pairs[k].continued, fs::exists(pair_dirs[k] / "continued" / "result.json")) << pair_dirs[k];
+    }
     EXPECT_GT(p.criterion, -o.evidence);
     EXPECT_EQ(p.rerun_errors.size(), 1u + static_cast<std::size_t>(o.scatter_runs));
     EXPECT_LT(p.error, d.error_before);
@@ -1601,6 +1615,7 @@ TEST(DiagnoseLoop, ThePairSearchRunsWhereNoEffectPassesAlone) {
   EXPECT_EQ(written["pair_search"]["rounds"], 2);
   EXPECT_EQ(written["pair_search"]["simulations"], p.simulations);
   EXPECT_EQ(written["pair_search"]["accepted"], false);
+  EXPECT_EQ(written["pair_search"]["pairs"][1]["targets"][1], other_abutment);
   // without rounds the search does not run and is not reported
   o.pair_rounds = 0;
   o.out = (dir / "none").string();

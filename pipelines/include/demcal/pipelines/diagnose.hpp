@@ -392,7 +392,9 @@ struct UnionSearch {
 // The pair search (DiagnoseOptions::pair_rounds): two effects that each explain part of the residual
 // may pass only together, since each alone is searched from a base fit that compensates for both.
 // Every pair of calibrated candidates (each effect at its kept target), and the lead of the
-// residual (unexplained_lead) with every effect probed but not calibrated, is searched on one
+// residual (unexplained_lead) with every effect probed but not calibrated and with other targets
+// of each effect (the two whose probes came closest; the lead's effect at those targets paired
+// with every effect at its own: the lead's target was chosen on a compensating base), is searched on one
 // emulator of the curves over the base parameters and the effects' (the union search's, its rows
 // grown by the pairs' runs) with both switched on, within a trust region around the pair's best
 // run; the pairs whose best run beats their calibrated effects' fits are judged on the median of
@@ -404,6 +406,7 @@ struct PairSearch {
 
   struct Pair {
     std::vector<std::string> effects;  // the two, in the candidates' order
+    std::vector<std::string> targets;  // each one's target ("" where the effect has none)
     double best_run_error = kNaN;      // the best of its proposals (a single run), N
     double error = kNaN;               // judged: the median of its best set's runs, N (NaN: not judged)
     double criterion = kNaN;           // judged: against the base, both effects' parameters counted
