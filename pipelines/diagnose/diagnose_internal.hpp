@@ -38,6 +38,10 @@ std::string percent(double share);
 
 // `s` usable as a file or folder name: every character but letters, digits, '-' and '_' -> '_'.
 std::string file_safe(std::string s);
+// "<effect> at <target>", or the effect alone where it has no target: a fit as the verdict names it.
+inline std::string effect_at(const std::string& effect, const std::string& target) {
+  return target.empty() ? effect : effect + " at " + target;
+}
 
 // report.md and its figures (diagnose_report.cpp).
 void write_diagnosis_report(const Diagnosis& diagnosis, const DiagnoseOptions& options);
@@ -255,7 +259,7 @@ struct ProbedTarget {
   EffectCandidate candidate;
   ExtendedModel model;
   std::map<std::string, double> warm;
-  double warm_error = std::numeric_limits<double>::infinity();  // its run's force error, N
+  double warm_error = std::numeric_limits<double>::infinity();  // the force error of warm's run, N
 };
 
 // What the stages of one diagnosis share: run_diagnosis makes it, each stage reads what the stages

@@ -341,7 +341,7 @@ void run_calibration(DiagnosisRun& run, CandidateCalibration& job, bool quiet) {
     if (job.other) progress(options, "the calibration of " + c.effect + " at " + job.fit.target + " failed: " + ex.what());
   }
   if (quiet)
-    progress(options, "base + " + c.effect + (job.fit.target.empty() ? "" : " at " + job.fit.target) + ": error " +
+    progress(options, "base + " + effect_at(c.effect, job.fit.target) + ": error " +
                           format_number(job.fit.error, 3) + " N after " + std::to_string(job.fit.simulations) +
                           " simulations");
 }

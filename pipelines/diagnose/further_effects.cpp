@@ -263,17 +263,15 @@ bool add_pair(DiagnosisRun& run) {
     const auto closest = std::min_element(report.pairs.begin(), report.pairs.end(), [](const auto& a, const auto& b) {
       return !(b.best_run_error <= a.best_run_error);  // NaN last
     });
-    const auto named = [&](std::size_t k) {
-      return closest->effects[k] + (closest->targets[k].empty() ? "" : " at " + closest->targets[k]);
-    };
     add_note(d, searched + (fits.empty() ? "no pair's best run fitted better than both of its effects alone (the closest, " +
-                                               named(0) + " and " + named(1) + ", " +
+                                               effect_at(closest->effects[0], closest->targets[0]) + " and " +
+                                               effect_at(closest->effects[1], closest->targets[1]) + ", " +
                                                format_number(closest->best_run_error, 3) + " N)."
                                          : "no pair's fit lowered the error without spoiling the held-out data."));
     return false;
   }
-  const auto named = [](const EffectCandidate& c) { return c.effect + (c.target.empty() ? "" : " at " + c.target); };
-  const std::string pair_text = named(*best->first) + " and " + named(*best->second);
+  const std::string pair_text =
+      effect_at(best->first->effect, best->first->target) + " and " + effect_at(best->second->effect, best->second->target);
   report.effects = {best->first->effect, best->second->effect};
   report.params = best->set;
   report.rerun_errors = best->fit.rerun_errors;
@@ -458,7 +456,7 @@ void add_further_effects(DiagnosisRun& run) {
   if (d.added.size() > 1) {
     std::string effects, errors = format_number(d.error_before, 3), shares;
     for (const auto& a : d.added) {
-      effects += (effects.empty() ? "" : "; ") + a.effect + (a.target.empty() ? "" : " at " + a.target) + ": " + a.parameters;
+      effects += (effects.empty() ? "" : "; ") + effect_at(a.effect, a.target) + ": " + a.parameters;
       errors += " → " + format_number(a.error_after, 3);
       if (std::isfinite(a.frequency)) shares += (shares.empty() ? "" : ", ") + percent(a.frequency);
     }

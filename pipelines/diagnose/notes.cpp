@@ -249,7 +249,7 @@ std::string verdict_headline(const Diagnosis& d, double noise, double scatter) {
   switch (d.outcome) {
     case DiagnosisOutcome::missing_effect:
       if (const EffectCandidate* c = chosen_candidate(d))
-        return "Missing: " + c->effect + (c->target.empty() ? "" : " at " + c->target) + ": " +
+        return "Missing: " + effect_at(c->effect, c->target) + ": " +
                fitted_effect_parameters(*c, d) + "; force error " + format_number(d.error_before, 3) + " → " +
                format_number(c->error, 3) + against + shares;
       break;

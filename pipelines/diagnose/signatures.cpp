@@ -198,7 +198,6 @@ struct TargetProbe {
   CampaignConfig fitted;   // the model on the fitted cases, what the probes run
   std::vector<std::vector<double>> points;      // the probes' fractions of the search ranges
   std::vector<std::vector<double>> signatures;  // the probes' curve changes (stacked)
-  double warm_error = std::numeric_limits<double>::infinity();
 
   // The effect's parameters at fractions `t` of their ranges, over the base set.
   std::map<std::string, double> values_at(const std::vector<double>& t, const DiagnosisRun& run) const {
@@ -206,8 +205,8 @@ struct TargetProbe {
   }
   // A probe's run: the search's start when it comes closer to the measurement than every earlier one.
   void note_run(const Evaluation& s, const std::map<std::string, double>& values) {
-    if (s.ok && s.error < warm_error) {
-      warm_error = s.error;
+    if (s.ok && s.error < probed.warm_error) {
+      probed.warm_error = s.error;
       probed.warm = values;
     }
   }
@@ -268,7 +267,7 @@ void finish_probe(TargetProbe& t, const SignatureBasis& basis, DiagnosisRun& run
   if (t.signatures.empty() && c.reason.empty()) c.reason = "every probe run of the effect failed";
   if (!c.target.empty())
     progress(run.options, "  " + c.effect + " at " + c.target + ": signature " + format_number(100 * c.signature_score, 2) +
-                              " %, best probe " + format_number(t.warm_error, 3) + " N");
+                              " %, best probe " + format_number(t.probed.warm_error, 3) + " N");
   t.signed_ = !t.signatures.empty();
 }
 
@@ -279,32 +278,29 @@ void choose_target(DiagnosisRun& run, const dem::Effect& effect, std::vector<Tar
   EffectCandidate best_target;
   best_target.effect = effect.name;
   best_target.signature_score = -1;
-  std::vector<ProbedTarget> probed_targets;
+  std::vector<ProbedTarget> probed_targets;  // the signed ones of a targeted effect
   for (auto& t : probes) {
     if (!t.applicable) {
       if (best_target.signature_score < 0 && best_target.reason.empty()) best_target = t.probed.candidate;
       continue;
     }
-    if (t.signed_) probed_targets.push_back(t.probed);
-    if (t.signed_ && !t.probed.candidate.target.empty()) {
-      run.probed_targets[effect.name].push_back(t.probed);
-      run.probed_targets[effect.name].back().warm_error = t.warm_error;
-    }
+    if (t.signed_ && !t.probed.candidate.target.empty()) probed_targets.push_back(t.probed);
     if (t.probed.candidate.signature_score > best_target.signature_score) {
       best_target = t.probed.candidate;
       run.models[effect.name] = t.probed.model;
       run.warm_starts[effect.name] = t.probed.warm;
     }
   }
-  for (auto& t : probed_targets)
+  for (const auto& t : probed_targets)
     if (t.candidate.target != best_target.target &&
         signature_comes_close(t.candidate.signature_score, best_target.signature_score, run.options.close_target_share))
-      run.close_targets[effect.name].push_back(std::move(t));
+      run.close_targets[effect.name].push_back(t);
+  if (!probed_targets.empty()) run.probed_targets[effect.name] = std::move(probed_targets);
   if (best_target.signature_score < 0) {
     best_target.signature_score = 0;
     if (best_target.reason.empty()) best_target.reason = "no target for this effect in the scene";
   }
-  progress(run.options, effect.name + (best_target.target.empty() ? "" : " at " + best_target.target) +
+  progress(run.options, effect_at(effect.name, best_target.target) +
                             ": signature explains " + format_number(100 * best_target.signature_score, 2) +
                             " % of the residual the base parameters cannot remove");
   run.d.candidates.push_back(best_target);
