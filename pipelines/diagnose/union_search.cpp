@@ -14,6 +14,7 @@
 #include <cmath>
 #include <limits>
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <set>
 
@@ -342,6 +343,30 @@ struct Union {
                const std::vector<ArchivedCase>& cases);
 };
 
+// The largest run id of each archive of `archives` (in order; -1 where it does not exist), as
+// `search` (a key of DIR/union-horizons.json) first read them: written there on the search's first
+// run, read back from there when the diagnosis is resumed (--resume) and the search had begun. In
+// the archives' order, not by path, so that a resume naming the folder another way reads them too.
+std::vector<std::int64_t> archive_horizons(const std::vector<std::string>& archives, const DiagnoseOptions& options,
+                                           const std::string& search) {
+  const fs::path file = fs::path(options.out) / "union-horizons.json";
+  nlohmann::json written = nlohmann::json::object();
+  if (fs::exists(file)) {
+    std::ifstream in(file);
+    written = nlohmann::json::parse(in, nullptr, false);
+    if (!written.is_object()) written = nlohmann::json::object();  // cut short by a kill: taken anew
+  }
+  const auto& stored = written.contains(search) ? written[search] : nlohmann::json();
+  if (options.resume && stored.is_array() && stored.size() == archives.size() &&
+      std::all_of(stored.begin(), stored.end(), [](const nlohmann::json& id) { return id.is_number_integer(); }))
+    return stored.get<std::vector<std::int64_t>>();
+  std::vector<std::int64_t> horizons;
+  for (const auto& path : archives) horizons.push_back(fs::exists(path) ? RunArchive(path).max_run_id() : -1);
+  written[search] = horizons;
+  std::ofstream(file) << written.dump(2) << '\n';
+  return horizons;
+}
+
 std::vector<std::shared_ptr<const CurveGrid>> grid_pointers(const std::vector<CaseCurveGrid>& grids) {
   std::vector<std::shared_ptr<const CurveGrid>> pointers;
   for (const auto& g : grids) pointers.push_back(g.grid);
@@ -397,15 +422,19 @@ Union::Union(DiagnosisRun& run, bool untried)
     }
   }
   // Every archived run of the models, on the grids of this step's objective: a further step's base
-  // model ran in the steps before it, whose archives come first.
+  // model ran in the steps before it, whose archives come first. Only the runs archived when this
+  // search first began: a resumed diagnosis reads the horizons that search wrote, so that runs the
+  // stages after it made (a continued search, the removal check) do not train its emulator and it
+  // makes the uninterrupted search again, its own rounds' runs read back from the archive.
   std::set<std::pair<int, std::vector<double>>> seen;
   std::vector<std::string> archives = run.earlier_archives;
   archives.push_back(diagnosis_archive(run.options));
-  for (const auto& path : archives) {
-    if (!fs::exists(path)) continue;
-    const RunArchive archive(path);
+  const std::vector<std::int64_t> horizons = archive_horizons(archives, run.options, untried ? "pair search" : "union search");
+  for (std::size_t a = 0; a < archives.size(); ++a) {
+    if (horizons[a] < 0 || !fs::exists(archives[a])) continue;
+    const RunArchive archive(archives[a]);
     for (const auto& m : models)
-      for (const auto& r : archive_training_rows(archive, m.fitted.space, m.cases)) {
+      for (const auto& r : archive_training_rows(archive, m.fitted.space, m.cases, horizons[a])) {
         if (r.outputs.size() == 0 || !std::isfinite(r.fitness)) continue;
         const Eigen::VectorXd x = layout.point(m.index, m.fitted.space.values(m.fitted.space.to_physical(r.unit)));
         if (x.size() == 0 || !seen.insert({m.index, std::vector<double>(x.data(), x.data() + x.size())}).second) continue;

@@ -1959,7 +1959,8 @@ TEST(DiagnoseLoop, CommandLineWritesTheDiagnosis) {
 // A diagnosis killed during a candidate's calibration and run again with --resume ends with the
 // diagnosis an uninterrupted run gives: the calibrations read their finished runs from the archive,
 // and the total budget (--max-simulations) counts those runs as the uninterrupted run did. Without
-// a budget, the candidates' calibrations killed side by side resume alike.
+// a budget, the candidates' calibrations killed side by side resume alike. Resumed again once it
+// has ended, with runs in its archive that it never made, it repeats itself.
 TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
   const fs::path dir = test_support::fresh_dir("diagnose", "resume");
   const dem::ArchOptions arch = cli_arch();
@@ -2013,6 +2014,22 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
     };
     EXPECT_EQ(text(resumed, "killed"), text(whole, "whole"))
         << "the resumed diagnosis differs from the uninterrupted one: " << json::diff(whole, resumed).dump();
+    // resumed once more after it ended (its diagnosis.json removed), its archive holding more runs
+    // of the base model than it had (a calibration of another seed, as a later stage's runs are):
+    // the union and pair searches read the runs as they stood when each first began, and the
+    // diagnosis is the same
+    json extra = j;
+    extra["optimiser"]["seed"] = 7;
+    extra["archive"] = (dir / ("killed" + variant) / "archive.sqlite").string();
+    std::ofstream(dir / "extra.json") << extra.dump(2);
+    ASSERT_EQ(std::system((std::string(DEMCAL_BINARY) + " calibrate " + (dir / "extra.json").string() + " --out " +
+                           (dir / ("extra" + variant)).string() + " > /dev/null 2>&1").c_str()), 0);
+    fs::remove(dir / ("killed" + variant) / "diagnosis.json");
+    ASSERT_EQ(std::system((command("killed") + " --quiet --resume > /dev/null 2>&1").c_str()), 0);
+    json again = test_support::read_json(dir / ("killed" + variant) / "diagnosis.json");
+    for (const char* key : {"wall_time_s", "timing", "session"}) again.erase(key);
+    EXPECT_EQ(text(again, "killed"), text(whole, "whole"))
+        << "the diagnosis resumed after it ended differs: " << json::diff(whole, again).dump();
   }
 }
 
