@@ -74,7 +74,7 @@ CurveGrid make_curve_grid(const smoothing::Curve& measured, const smoothing::Obj
     c.upper = envelope.x.back();
     const auto w = objective.channel_weights.find(column);
     c.weight = w == objective.channel_weights.end() ? 1.0 : w->second;
-    c.measured = objective2 ? objective2->smoothed_experiment().at(column) : smoothing::series(measured, column, objective.force_column);
+    c.measured = objective2 ? smoothing::loading_envelope(objective2->smoothed_experiment().at(column)) : envelope;
     grid.channels.push_back(std::move(c));
   }
   if (grid.channels.empty()) throw smoothing::CurveError(measured.source + ": no displacement channel");
@@ -100,6 +100,8 @@ smoothing::XYSeries output_channel(const Eigen::VectorXd& outputs, Eigen::Index 
   const Eigen::Index start = offset + static_cast<Eigen::Index>(channel) * (grid.points + 1);
   const double end = std::clamp(outputs[start + grid.points], grid.displacement(c, 1), c.upper);
   smoothing::XYSeries s;
+  s.x.reserve(static_cast<std::size_t>(grid.points));
+  s.y.reserve(static_cast<std::size_t>(grid.points));
   for (int k = 0; k < grid.points; ++k) {
     const double w = grid.displacement(c, k);
     if (w >= end) {
@@ -121,10 +123,14 @@ double curve_fitness(const Eigen::VectorXd& outputs, const std::vector<std::shar
   Eigen::Index offset = 0;
   for (const auto& grid : grids) {
     double f = 0;
-    for (size_t c = 0; c < grid->channels.size(); ++c)
-      f += grid->channels[c].weight *
-           smoothing::channel_misfit(grid->channels[c].measured, output_channel(outputs, offset, *grid, c), grid->objective_points,
-                                     grid->channels[c].column, grid->objective_window);
+    for (size_t c = 0; c < grid->channels.size(); ++c) {
+      // Its displacements increase strictly, so only a non-finite force leaves a row out of its envelope.
+      smoothing::XYSeries predicted = output_channel(outputs, offset, *grid, c);
+      if (!std::all_of(predicted.y.begin(), predicted.y.end(), [](double y) { return std::isfinite(y); }))
+        predicted = smoothing::loading_envelope(predicted);
+      f += grid->channels[c].weight * smoothing::envelope_misfit(grid->channels[c].measured, predicted, grid->objective_points,
+                                                                 grid->channels[c].column, grid->objective_window);
+    }
     fitness += grid->case_weight * f;
     offset += grid->size();
   }

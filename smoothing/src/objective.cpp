@@ -50,6 +50,8 @@ XYSeries loading_envelope(const XYSeries& s) {
     throw CurveError("loading_envelope: x and y differ in length (" + std::to_string(s.x.size()) +
                      " and " + std::to_string(s.y.size()) + ")");
   XYSeries env;
+  env.x.reserve(s.x.size());
+  env.y.reserve(s.y.size());
   for (std::size_t i = 0; i < s.x.size(); ++i) {
     const double x = s.x[i], y = s.y[i];
     if (!std::isfinite(x) || !std::isfinite(y)) continue;
@@ -116,8 +118,12 @@ std::pair<double, double> objective_window(const XYSeries& e, const XYSeries& s,
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
                       const std::string& label, ObjectiveWindow window) {
   if (points < 2) throw std::invalid_argument("channel_misfit: points must be >= 2");
-  const XYSeries e = loading_envelope(experiment);
-  const XYSeries s = loading_envelope(simulation);
+  return envelope_misfit(loading_envelope(experiment), loading_envelope(simulation), points, label, window);
+}
+
+double envelope_misfit(const XYSeries& e, const XYSeries& s, int points, const std::string& label,
+                       ObjectiveWindow window) {
+  if (points < 2) throw std::invalid_argument("channel_misfit: points must be >= 2");
   if (e.x.size() < 2)
     throw CurveError(label + ": the experiment has fewer than 2 loading points (finite, increasing displacement)");
   if (s.x.empty()) throw CurveError(label + ": the simulation has no loading point (finite, increasing displacement)");

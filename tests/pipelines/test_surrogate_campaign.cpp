@@ -189,6 +189,11 @@ TEST(SurrogateData, CurveOutputsScoreAsTheObjectiveScoresTheRun) {
     EXPECT_DOUBLE_EQ(outputs[40], run.columns[0].values.back()) << "the last output is the run's end displacement";
     const double expected = 2.0 * smoothing::objective1(measured, run, objective).fitness;
     EXPECT_NEAR(curve_fitness(outputs, {grid}), expected, 0.02 * expected + 0.001 * scale);
+    // to the bit, the objective's channel misfit of the measured series and the grid's curve
+    EXPECT_EQ(curve_fitness(outputs, {grid}),
+              2.0 * smoothing::channel_misfit(smoothing::series(measured, "top_horizontal", "force"),
+                                              output_channel(outputs, 0, *grid, 0), objective.points, "top_horizontal",
+                                              objective.window));
   }
   smoothing::Curve other = toy_curve(6000, 1e7, 0.010, 0);
   other.columns[0].name = "other_gauge";

@@ -87,6 +87,21 @@ TEST(Objective1, LoadingEnvelopeRule) {
   EXPECT_DOUBLE_EQ(channel_misfit(monotone, other, 4), std::sqrt(0 + 25 + 4 + 9));
 }
 
+// A series compared with many others is enveloped once: the envelope of an envelope is itself, and
+// envelope_misfit of two envelopes is channel_misfit of their series, to the bit, under either window.
+TEST(Objective1, EnvelopeMisfitOfTheEnvelopesIsTheChannelMisfit) {
+  const XYSeries measured{{0, 0.4, 0.3, 1.1, 1.1, NAN, 2.05, 1.9, 3.3}, {0, 1.7, 9, 4.1, 5.3, 7, 2.2, 9, 3.9}};
+  const XYSeries simulated{{-0.1, 0.2, 0.9, 0.85, 2.6, 2.9}, {0.3, 1.1, 4.4, 6, NAN, 3.3}};
+  const XYSeries e = loading_envelope(measured), s = loading_envelope(simulated);
+  EXPECT_EQ(loading_envelope(e).x, e.x);
+  EXPECT_EQ(loading_envelope(e).y, e.y);
+  for (const auto window : {ObjectiveWindow::common, ObjectiveWindow::measured})
+    for (const int n : {2, 7, 200})
+      EXPECT_EQ(envelope_misfit(e, s, n, "dv", window), channel_misfit(measured, simulated, n, "dv", window)) << n;
+  expect_curve_error([&] { envelope_misfit(XYSeries{{0}, {1}}, s, 7, "dv"); }, {"dv", "fewer than 2 loading points"});
+  EXPECT_THROW(envelope_misfit(e, s, 1), std::invalid_argument);
+}
+
 TEST(Objective1, Errors) {
   const Curve e = curve("e.csv", {{"force", "", {0, 1}}, {"dv", "", {0, 1}}});
   const Curve no_force = curve("s.csv", {{"F", "", {0, 1}}, {"dv", "", {0, 1}}});

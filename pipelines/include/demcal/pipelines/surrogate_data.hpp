@@ -28,7 +28,7 @@ struct CurveGrid {
     std::string column;
     double lower = 0, upper = 0;      // the measured channel's displacement range
     double weight = 1;                // the objective's channel weight
-    smoothing::XYSeries measured;     // what a predicted curve is compared with
+    smoothing::XYSeries measured;     // what a predicted curve is compared with, as its loading envelope
   };
   std::vector<Channel> channels;
   std::string force_column = "force";

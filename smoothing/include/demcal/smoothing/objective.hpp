@@ -84,6 +84,11 @@ std::pair<double, double> objective_window(const XYSeries& experiment_envelope, 
 // experiment has fewer than 2 envelope points, the simulation none, or the window is empty.
 double channel_misfit(const XYSeries& experiment, const XYSeries& simulation, int points,
                       const std::string& label = "channel", ObjectiveWindow window = ObjectiveWindow::common);
+// channel_misfit of two series that are loading envelopes already (loading_envelope's output:
+// strictly increasing x, finite): the same value, without enveloping them again. A caller that
+// compares many simulated series with one measured series envelopes the measured one once.
+double envelope_misfit(const XYSeries& experiment_envelope, const XYSeries& simulation_envelope, int points,
+                       const std::string& label = "channel", ObjectiveWindow window = ObjectiveWindow::common);
 
 // The largest displacement of each displacement column's loading envelope (column -> x); columns
 // with fewer than 2 envelope points are left out.
