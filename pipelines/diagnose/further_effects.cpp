@@ -446,6 +446,7 @@ void add_further_effects(DiagnosisRun& run) {
     }
     added.front().parameters = fitted_effect_parameters(with_all, run.d);
     added.front().bounds = with_all.bounds;
+    conclude_tentative(d, *first);
   }
   d.added = added;
   d.chosen = in_model;

@@ -297,6 +297,15 @@ std::string tentative_effect(const Diagnosis& d, const DiagnoseOptions& options)
   return best == nullptr ? "" : best->effect;
 }
 
+void conclude_tentative(Diagnosis& d, const EffectCandidate& first) {
+  const std::string alone = "No effect passed alone (base error " + format_number(d.error_before, 3) + " N); " +
+                            first.effect + ", of lowest criterion among those that lower it (to " +
+                            format_number(first.error, 3) + " N, criterion change " + format_number(first.score, 3) +
+                            "), was added tentatively and its model diagnosed for a further effect (the notes).";
+  if (d.verdict.rfind(d.conclusion, 0) == 0) d.verdict = alone + d.verdict.substr(d.conclusion.size());
+  d.conclusion = alone;
+}
+
 double error_floor(double noise, double scatter, const DiagnoseOptions& options) {
   if (!std::isfinite(scatter)) return noise;
   return std::hypot(noise, std::min(scatter, options.scatter_floor_ratio * noise));

@@ -497,6 +497,29 @@ TEST(Evidence, TheTentativeEffectIsTheBestCriterionThatLowersTheError) {
 
 // The headline says in one sentence what was found: the missing effect with its parameters in
 // engineering units and the range the data allow, or why nothing is added, with the errors.
+// Where the effect added tentatively stays beside a further one, the conclusion says what the first
+// step did instead of its "No effect found", which would contradict the headline; the notes stay.
+TEST(Evidence, AKeptTentativeEffectIsConcludedAsAddedTentatively) {
+  Diagnosis d;
+  d.error_before = 492;
+  d.conclusion = "No effect found: the base fit misses the curves (closest: joint-closure).";
+  d.headline = "Missing 2 effects: joint-closure ...; joint-closure added tentatively (it did not pass alone).";
+  d.notes = {"With joint-closure added tentatively, the diagnosis ran again: ..."};
+  d.verdict = d.conclusion + " " + d.notes.front();  // the conclusion, then the notes
+  EffectCandidate first;
+  first.effect = "joint-closure";
+  first.error = 313;
+  first.score = -3.3;
+  const std::string headline = d.headline;
+  conclude_tentative(d, first);
+  EXPECT_EQ(d.conclusion.rfind("No effect passed alone (base error 492 N); joint-closure, of lowest criterion", 0), 0u)
+      << d.conclusion;
+  EXPECT_NE(d.conclusion.find("313 N, criterion change -3.3"), std::string::npos) << d.conclusion;
+  EXPECT_EQ(d.conclusion.find("No effect found"), std::string::npos);
+  EXPECT_EQ(d.verdict, d.conclusion + " With joint-closure added tentatively, the diagnosis ran again: ...");
+  EXPECT_EQ(d.headline, headline);
+}
+
 TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {
   Diagnosis d = base_missing_by(232, 44);
   d.base_params = {{"kn", 1e9}};
@@ -1752,6 +1775,7 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   const json written = test_support::read_json(dir / "out" / "diagnosis.json");
   ASSERT_TRUE(written["added"].is_array());
   EXPECT_EQ(written["added"].size(), d.added.size());
+  EXPECT_EQ(d.verdict.rfind(d.conclusion, 0), 0u) << "the verdict is the conclusion, then the notes: " << d.verdict;
   // each effect added is in the verdict or was dropped again by its removal check
   const auto dropped = std::count_if(d.removal_checks.begin(), d.removal_checks.end(), [&](const Diagnosis::RemovalCheck& r) {
     return r.dropped && std::any_of(d.added.begin(), d.added.end(), [&](const auto& a) { return a.effect == r.effect; });
@@ -1797,6 +1821,9 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
     EXPECT_EQ(d.added.size(), 2u);
     EXPECT_TRUE(std::isnan(d.added.front().frequency));
     EXPECT_NE(d.verdict.find("With " + first + " added tentatively"), std::string::npos) << d.verdict;
+    // the first step's "No effect found" would contradict the headline
+    EXPECT_EQ(d.conclusion.rfind("No effect passed alone", 0), 0u) << d.conclusion;
+    EXPECT_NE(d.conclusion.find(first + ", of lowest criterion"), std::string::npos) << d.conclusion;
   }
   if (d.added.size() == 2) {
     EXPECT_EQ(d.added[1].folder, step.string());

@@ -787,6 +787,11 @@ std::vector<std::string> candidates_to_search_further(const Diagnosis& diagnosis
 // "unexplained" (no effect needed: nothing to look for; a tie: the data already disagree) or when
 // the options rule it out (tentative_effect or removal_check off, max_effects 1).
 std::string tentative_effect(const Diagnosis& diagnosis, const DiagnoseOptions& options);
+// Where the effect added tentatively (`first`) is kept beside a further effect: the conclusion,
+// the first step's "No effect found: ...", which would contradict the headline, replaced by what
+// the step did ("No effect passed alone (...); <effect> ... was added tentatively ..."), and the
+// verdict (the conclusion, then the notes) with it.
+void conclude_tentative(Diagnosis& diagnosis, const EffectCandidate& first);
 
 // A sentence for the verdict when the chosen effect's fit, after any further search, still misses
 // the curves by more than the level at which the loop calls a fit explained (noise_level_ratio x
