@@ -495,8 +495,6 @@ TEST(Evidence, TheTentativeEffectIsTheBestCriterionThatLowersTheError) {
   EXPECT_EQ(tentative_effect(d, DiagnoseOptions{}), "");
 }
 
-// The headline says in one sentence what was found: the missing effect with its parameters in
-// engineering units and the range the data allow, or why nothing is added, with the errors.
 // Where the effect added tentatively stays beside a further one, the conclusion says what the first
 // step did instead of its "No effect found", which would contradict the headline; the notes stay.
 TEST(Evidence, AKeptTentativeEffectIsConcludedAsAddedTentatively) {
@@ -520,6 +518,8 @@ TEST(Evidence, AKeptTentativeEffectIsConcludedAsAddedTentatively) {
   EXPECT_EQ(d.headline, headline);
 }
 
+// The headline says in one sentence what was found: the missing effect with its parameters in
+// engineering units and the range the data allow, or why nothing is added, with the errors.
 TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {
   Diagnosis d = base_missing_by(232, 44);
   d.base_params = {{"kn", 1e9}};
