@@ -11,6 +11,8 @@
 // - the rows name every long flag the help prints and no other; `--help` and the program's own
 //   options (those `demcal --help` prints, such as `--limit`) are documented once, on README.md;
 // - a page has at most 400 lines.
+// Besides, every link between the project's Markdown pages (README.md, docs/) reaches its file,
+// and a link to a heading reaches one of that page's headings.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -156,6 +158,49 @@ std::vector<CommandPath> command_paths() {
 
 fs::path page_of(const CommandPath& path) { return kPages / (path.empty() ? "README.md" : path[0] + ".md"); }
 
+// GitHub's anchor of a heading: lower case, spaces to hyphens, every character but letters, digits,
+// hyphens and underscores left out. Non-ASCII letters are kept (Latin and Greek; `ç`), other
+// non-ASCII characters (dashes, arrows, ×) left out; upper-case non-ASCII letters are not lowered.
+std::string heading_anchor(const std::string& heading) {
+  std::string anchor;
+  for (std::size_t i = 0; i < heading.size();) {
+    const auto c = static_cast<unsigned char>(heading[i]);
+    if (c < 0x80) {
+      if (std::isalnum(c) || c == '-' || c == '_') anchor += static_cast<char>(std::tolower(c));
+      if (c == ' ') anchor += '-';
+      ++i;
+      continue;
+    }
+    const std::size_t length = c >= 0xF0 ? 4 : c >= 0xE0 ? 3 : 2;
+    unsigned code = length == 2 ? c & 0x1F : length == 3 ? c & 0x0F : c & 0x07;
+    for (std::size_t k = 1; k < length && i + k < heading.size(); ++k)
+      code = (code << 6) | (static_cast<unsigned char>(heading[i + k]) & 0x3F);
+    const bool letter = (code >= 0xC0 && code <= 0x24F && code != 0xD7 && code != 0xF7) || (code >= 0x370 && code <= 0x3FF);
+    if (letter) anchor += heading.substr(i, length);
+    i += length;
+  }
+  return anchor;
+}
+
+// The anchors of a Markdown page's headings (outside code fences); a repeated heading's later
+// anchors get -1, -2, ... as GitHub numbers them.
+std::set<std::string> heading_anchors(const fs::path& file) {
+  std::ifstream in(file);
+  std::set<std::string> anchors;
+  std::map<std::string, int> seen;
+  bool fence = false;
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("```", 0) == 0) fence = !fence;
+    if (fence || line.rfind('#', 0) != 0) continue;
+    const std::size_t text = line.find_first_not_of('#');
+    if (text == std::string::npos || line[text] != ' ') continue;
+    std::string anchor = heading_anchor(line.substr(text + 1));
+    const int repeat = seen[anchor]++;
+    anchors.insert(repeat == 0 ? anchor : anchor + "-" + std::to_string(repeat));
+  }
+  return anchors;
+}
+
 }  // namespace
 
 TEST(Docs, HelpListsTheCommandsAndTheirOptions) {
@@ -235,4 +280,43 @@ TEST(Docs, EveryCommandsOptionsTableMatchesItsHelp) {
       EXPECT_NE(std::find(paths.begin(), paths.end(), path), paths.end())
           << file << ": an options heading names `" << joined(path) << "`, which is no command";
   }
+}
+
+// Links between the pages: `[text](path)`, `[text](path#anchor)` and `[text](#anchor)`, outside
+// code fences; addresses with a scheme (https:, mailto:) are not followed.
+TEST(Docs, EveryLinkBetweenPagesReachesItsFileAndHeading) {
+  const fs::path root(DEMCAL_SOURCE_DIR);
+  std::vector<fs::path> pages{root / "README.md"};
+  for (const auto& entry : fs::recursive_directory_iterator(root / "docs"))
+    if (entry.path().extension() == ".md") pages.push_back(entry.path());
+  static const std::regex link("\\]\\(([^()\\s]+)\\)");
+  std::map<fs::path, std::set<std::string>> anchors;
+  int links = 0;
+  for (const auto& page : pages) {
+    std::ifstream in(page);
+    bool fence = false;
+    int number = 0;
+    for (std::string line; std::getline(in, line);) {
+      ++number;
+      if (line.rfind("```", 0) == 0) fence = !fence;
+      if (fence) continue;
+      for (std::sregex_iterator it(line.begin(), line.end(), link), end; it != end; ++it) {
+        const std::string target = (*it)[1].str();
+        if (target.find(':') != std::string::npos) continue;
+        ++links;
+        const std::size_t hash = target.find('#');
+        const std::string file_part = target.substr(0, hash);
+        const fs::path file = file_part.empty() ? page : (page.parent_path() / file_part).lexically_normal();
+        const std::string where = page.lexically_relative(root).string() + ":" + std::to_string(number) + ": " + target;
+        if (!fs::exists(file)) {
+          ADD_FAILURE() << where << ": no such file";
+          continue;
+        }
+        if (hash == std::string::npos || file.extension() != ".md") continue;
+        if (!anchors.count(file)) anchors[file] = heading_anchors(file);
+        EXPECT_TRUE(anchors[file].count(target.substr(hash + 1))) << where << ": no such heading";
+      }
+    }
+  }
+  EXPECT_GT(links, 100);  // the pages link to each other
 }
