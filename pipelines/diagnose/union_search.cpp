@@ -596,39 +596,41 @@ struct PairModel {
 
 }  // namespace
 
-std::vector<PairFit> search_pairs(DiagnosisRun& run) {
-  if (run.options.pair_rounds <= 0) return {};
-  const DiagnoseOptions& options = run.options;
-  PairSearch& report = run.d.pair_search;
-  const long simulations_before = run.runner.simulations();
-  Union u(run, true);
+namespace {
+
+// An effect's fit: its calibration's best set, or for one not calibrated (or at another target) its
+// best probe's set.
+const std::map<std::string, double>& fit_of(const DiagnosisRun& run, const UnionModel& m) {
+  if (m.other_target_fit != nullptr) return *m.other_target_fit;
+  const auto found = run.best_sets.find(m.candidate->effect);
+  return found != run.best_sets.end() ? found->second : run.warm_starts.at(m.candidate->effect);
+}
+
+// A model's name in the progress lines, and in its pair's folder: the effect, and the target where
+// it is not the candidate's own.
+std::string name_of(const UnionModel& m) {
+  return m.candidate->effect + (m.other_target_fit != nullptr ? " at " + m.candidate->target : "");
+}
+std::string folder_of(const UnionModel& m) {
+  return m.candidate->effect + (m.other_target_fit != nullptr ? "-at-" + file_safe(m.candidate->target) : "");
+}
+std::string name_of(const std::vector<UnionModel>& models, const PairModel& p) {
+  return name_of(models[p.first]) + " + " + name_of(models[p.second]);
+}
+
+// The pairs on offer (Union::models indices): every pair of calibrated candidates, and the lead of
+// the residual (the fit a tentative effect would start from) with every effect probed but not
+// calibrated and every other target: the partner it would look for. The lead's target was chosen
+// on a base fit that compensates, so its effect at its other targets is paired with every effect
+// at its own too. Two targets of one effect are not paired.
+std::vector<std::pair<std::size_t, std::size_t>> pairs_on_offer(const DiagnosisRun& run, const Union& u) {
   const auto& models = u.models;
-  // An effect's fit: its calibration's best set, or for one not calibrated (or at another target)
-  // its best probe's set.
-  const auto fit_of = [&](const UnionModel& m) -> const std::map<std::string, double>& {
-    if (m.other_target_fit != nullptr) return *m.other_target_fit;
-    const auto found = run.best_sets.find(m.candidate->effect);
-    return found != run.best_sets.end() ? found->second : run.warm_starts.at(m.candidate->effect);
-  };
-  // A model's name in the progress lines and its pair's folder: the effect, and the target where
-  // it is not the candidate's own.
-  const auto name_of = [&](const UnionModel& m) {
-    return m.candidate->effect + (m.other_target_fit != nullptr ? " at " + m.candidate->target : "");
-  };
-  const auto folder_of = [&](const UnionModel& m) {
-    return m.candidate->effect + (m.other_target_fit != nullptr ? "-at-" + file_safe(m.candidate->target) : "");
-  };
-  // Every pair of calibrated candidates, and the lead of the residual (the fit a tentative effect
-  // would start from) with every effect probed but not calibrated and every other target: the
-  // partner it would look for. The lead's target was chosen on a base fit that compensates, so its
-  // effect at its other targets is paired with every effect at its own too. Two targets of one
-  // effect are not paired.
-  std::vector<std::pair<std::size_t, std::size_t>> chosen;
-  const EffectCandidate* lead = unexplained_lead(run.d, options);
+  const EffectCandidate* lead = unexplained_lead(run.d, run.options);
   const auto own_target = [&](std::size_t i) { return models[i].other_target_fit == nullptr; };
   const auto lead_elsewhere = [&](std::size_t i) {
     return lead != nullptr && !own_target(i) && models[i].candidate->effect == lead->effect;
   };
+  std::vector<std::pair<std::size_t, std::size_t>> chosen;
   for (std::size_t i = 1; i < models.size(); ++i)
     for (std::size_t j = i + 1; j < models.size(); ++j) {
       if (models[i].candidate->effect == models[j].candidate->effect) continue;
@@ -637,9 +639,18 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
                              (lead_elsewhere(i) && own_target(j)) || (lead_elsewhere(j) && own_target(i));
       if (calibrated || with_lead) chosen.emplace_back(i, j);
     }
-  std::vector<PairModel> pairs;
+  return chosen;
+}
+
+// Each pair's model: the first's model extended by the second effect at its target, its space the
+// first's calibration's and the second's own parameters, started at the first's fit.
+std::vector<PairModel> pair_models(const DiagnosisRun& run, const Union& u,
+                                   const std::vector<std::pair<std::size_t, std::size_t>>& chosen) {
+  const DiagnoseOptions& options = run.options;
+  const auto& models = u.models;
   const dem::ResponseScales scales{std::isfinite(run.d.peak_normal_stress) ? run.d.peak_normal_stress : 0,
                                    std::isfinite(run.d.start_normal_stress) ? run.d.start_normal_stress : 0};
+  std::vector<PairModel> pairs;
   for (const auto& [i, j] : chosen) {
     PairModel p;
     p.first = i;
@@ -656,18 +667,23 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
                         scales, folder);
     p.folder = folder;
     p.fitted = fitted_cases(p.extended.config, options);
-    p.fitted.space = extended_space(p.extended, with_first, fit_of(models[i]), options);
+    p.fitted.space = extended_space(p.extended, with_first, fit_of(run, models[i]), options);
     p.cases = archived_cases(p.fitted, u.case_grids);
     pairs.push_back(std::move(p));
   }
-  if (pairs.empty()) return {};
+  return pairs;
+}
 
-  // Round 1 simulates each pair where both effects' fits meet: one effect's best set with the
-  // other's own parameters at its fit, and the other way round. Each later round searches the
-  // emulator within a trust region around the pair's best run so far (a box of half-width `radius`
-  // in the unit cube, doubled after a round that improved on it, halved after one that did not;
-  // a pair whose region shrinks below kLeastRadius has converged and stops): an emulator searched
-  // over the whole space proposes where it is wrong, far from every run of the model with both.
+// The rounds. Round 1 simulates each pair where both effects' fits meet: one effect's best set with
+// the other's own parameters at its fit, and the other way round. Each later round searches the
+// emulator within a trust region around the pair's best run so far (a box of half-width `radius`
+// in the unit cube, doubled after a round that improved on it, halved after one that did not; a
+// pair whose region shrinks below kLeastRadius has converged and stops): an emulator searched over
+// the whole space proposes where it is wrong, far from every run of the model with both. Every run
+// joins the emulator's rows; each pair keeps its best run.
+void search_pair_rounds(DiagnosisRun& run, Union& u, std::vector<PairModel>& pairs) {
+  const DiagnoseOptions& options = run.options;
+  const auto& models = u.models;
   for (int round = 1; round <= options.pair_rounds; ++round) {
     std::vector<RunRequest> requests;
     std::vector<std::size_t> of_pair;
@@ -683,8 +699,8 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
     if (round == 1) {
       for (std::size_t k = 0; k < pairs.size(); ++k) {
         const PairModel& p = pairs[k];
-        const auto* first = &fit_of(models[p.first]);
-        const auto* second = &fit_of(models[p.second]);
+        const auto* first = &fit_of(run, models[p.first]);
+        const auto* second = &fit_of(run, models[p.second]);
         const std::size_t before = points.size();
         for (const auto& [base, other] : {std::pair{first, second}, std::pair{second, first}}) {
           std::map<std::string, double> met = *other;           // the other's own parameters,
@@ -714,7 +730,7 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
       }
     }
     if (requests.empty() || run.within_budget(static_cast<long>(requests.size())) < static_cast<long>(requests.size())) break;
-    report.rounds = round;
+    run.d.pair_search.rounds = round;
     const std::vector<Evaluation> evaluations = run.runner.evaluate_all(requests);
     std::vector<bool> improved(pairs.size(), false);
     for (std::size_t r = 0; r < evaluations.size(); ++r) {
@@ -733,16 +749,65 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
         if (std::find(of_pair.begin(), of_pair.end(), k) != of_pair.end())
           pairs[k].radius = improved[k] ? std::min(kLargestRadius, 2 * pairs[k].radius) : pairs[k].radius / 2;
     std::string line;
-    for (const auto& p : pairs)
-      line += (line.empty() ? "" : ", ") + name_of(models[p.first]) + " + " + name_of(models[p.second]) + " " +
-              format_number(p.best_error, 3) + " N";
+    for (const auto& p : pairs) line += (line.empty() ? "" : ", ") + name_of(models, p) + " " + format_number(p.best_error, 3) + " N";
     progress(options, "pair search, round " + std::to_string(round) + " (an emulator of " + std::to_string(u.rows.size()) +
                           " runs): best so far " + line);
   }
   run.runner.add_model_seconds(u.model_s);
+}
 
-  // The pairs whose best run beats both of their effects' fits, lowest first, judged on the median
-  // of their best set's runs.
+// The closest pair calibrated as a candidate is, over the whole space of the model with both, its
+// design starting at its best run: a few trust-region steps locate the pair's valley, a candidate's
+// search budget reaches into it. The calibration minimises the campaign's objective, the judge is
+// the force error: the best run is judged too where the calibration's fit is not below it, and the
+// lower fit kept. Above the noise and scatter, its search is continued once from its fit, as a
+// lead's is. False where no fit could be judged.
+bool calibrate_closest_pair(DiagnosisRun& run, const Union& u, const PairModel& p, long budget, PairFit& f,
+                            PairSearch::Pair& entry) {
+  const DiagnoseOptions& options = run.options;
+  const std::string pair = name_of(u.models, p);
+  const fs::path folder = p.folder / "calibration";
+  progress(options, "pair search: calibrating base + " + pair + " (" + std::to_string(budget) +
+                        " simulations) from its best run (" + format_number(p.best_error, 3) + " N) in " + folder.string());
+  try {
+    calibrate_candidate(f.fit, f.set, p.extended, p.with_first, p.best_set, options, budget, folder, p.best_set,
+                        run.base.residuals, run.runner);
+  } catch (const std::exception& ex) {
+    f.fit.reason = std::string("its calibration failed: ") + ex.what();
+  }
+  entry.calibrated = true;
+  if (!(f.fit.error <= p.best_error)) {
+    EffectCandidate at_best = f.fit;
+    at_best.params = p.best_set;
+    at_best.reason.clear();
+    const std::vector<Evaluation> runs =
+        runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
+    f.fit.simulations += static_cast<long>(runs.size());
+    if (judge_fit(at_best, runs) && !(at_best.error >= f.fit.error)) {
+      at_best.simulations = f.fit.simulations;
+      f.fit = std::move(at_best);
+      f.set = p.best_set;
+    }
+  }
+  const long further = run.within_budget(run.continued_budget());
+  if (f.fit.error > options.noise_level_ratio * floor_of(run.d, options) && further >= 2 * run.config.optimiser.population) {
+    const fs::path continued = folder.parent_path() / "continued";
+    progress(options, "pair search: " + pair + " stays at " + format_number(f.fit.error, 3) + " N: its search continued (" +
+                          std::to_string(further) + " simulations) in " + continued.string());
+    continue_search(f.fit, f.set, p.extended, p.with_first, f.set, options, further, continued, run.base.residuals,
+                    run.runner, pair);
+    entry.continued = true;
+  }
+  return std::isfinite(f.fit.error);
+}
+
+// Every pair's best run into the report; the pairs whose best run beats both of their effects'
+// fits, lowest first (at most kJudgedPairs), judged on the median of their best set's runs, the
+// first calibrated (calibrate_closest_pair) where the budget allows a candidate's search.
+std::vector<PairFit> judge_pairs(DiagnosisRun& run, const Union& u, const std::vector<PairModel>& pairs) {
+  const DiagnoseOptions& options = run.options;
+  const auto& models = u.models;
+  PairSearch& report = run.d.pair_search;
   std::vector<std::size_t> order;
   for (std::size_t k = 0; k < pairs.size(); ++k) {
     const PairModel& p = pairs[k];
@@ -772,49 +837,7 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
     f.fit.params = p.best_set;
     const long budget = run.within_budget(run.per_candidate);
     if (k == order.front() && budget >= 2 * run.config.optimiser.population) {
-      // The closest pair calibrated as a candidate is, over the whole space of the model with both,
-      // its design starting at its best run: a few trust-region steps locate the pair's valley, a
-      // candidate's search budget reaches into it.
-      const std::string pair = name_of(models[p.first]) + " + " + name_of(models[p.second]);
-      const fs::path folder = p.folder / "calibration";
-      progress(options, "pair search: calibrating base + " + pair + " (" +
-                            std::to_string(budget) + " simulations) from its best run (" +
-                            format_number(p.best_error, 3) + " N) in " + folder.string());
-      try {
-        calibrate_candidate(f.fit, f.set, p.extended, p.with_first, p.best_set, options, budget, folder, p.best_set,
-                            run.base.residuals, run.runner);
-      } catch (const std::exception& ex) {
-        f.fit.reason = std::string("its calibration failed: ") + ex.what();
-      }
-      report.pairs[k].calibrated = true;
-      // The calibration minimises the campaign's objective, the judge is the force error: the best
-      // run is judged too where the calibration's fit is not below it, and the lower fit kept.
-      if (!(f.fit.error <= p.best_error)) {
-        EffectCandidate at_best = f.fit;
-        at_best.params = p.best_set;
-        at_best.reason.clear();
-        const std::vector<Evaluation> runs =
-            runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
-        f.fit.simulations += static_cast<long>(runs.size());
-        if (judge_fit(at_best, runs) && !(at_best.error >= f.fit.error)) {
-          at_best.simulations = f.fit.simulations;
-          f.fit = std::move(at_best);
-          f.set = p.best_set;
-        }
-      }
-      // Above the noise and scatter, its search continued once from its fit, as a lead's is.
-      const long further = run.within_budget(run.continued_budget());
-      if (f.fit.error > options.noise_level_ratio * floor_of(run.d, options) &&
-          further >= 2 * run.config.optimiser.population) {
-        const fs::path continued = folder.parent_path() / "continued";
-        progress(options, "pair search: " + pair + " stays at " + format_number(f.fit.error, 3) +
-                              " N: its search continued (" + std::to_string(further) + " simulations) in " +
-                              continued.string());
-        continue_search(f.fit, f.set, p.extended, p.with_first, f.set, options, further, continued, run.base.residuals,
-                        run.runner, pair);
-        report.pairs[k].continued = true;
-      }
-      if (!std::isfinite(f.fit.error)) continue;
+      if (!calibrate_closest_pair(run, u, p, budget, f, report.pairs[k])) continue;
     } else {
       const std::vector<Evaluation> runs =
           runs_with_reruns(p.extended.config, p.fitted, p.best_set, &run.base.residuals, options.scatter_runs, run.runner);
@@ -824,7 +847,20 @@ std::vector<PairFit> search_pairs(DiagnosisRun& run) {
         static_cast<int>(f.first_model->parameter_names.size() + f.second_model->parameter_names.size());
     fits.push_back(std::move(f));
   }
-  report.simulations = run.runner.simulations() - simulations_before;  // the calibrations' re-runs included
+  return fits;
+}
+
+}  // namespace
+
+std::vector<PairFit> search_pairs(DiagnosisRun& run) {
+  if (run.options.pair_rounds <= 0) return {};
+  const long simulations_before = run.runner.simulations();
+  Union u(run, true);
+  std::vector<PairModel> pairs = pair_models(run, u, pairs_on_offer(run, u));
+  if (pairs.empty()) return {};
+  search_pair_rounds(run, u, pairs);
+  std::vector<PairFit> fits = judge_pairs(run, u, pairs);
+  run.d.pair_search.simulations = run.runner.simulations() - simulations_before;  // the calibrations' re-runs included
   return fits;
 }
 
