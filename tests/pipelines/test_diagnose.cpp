@@ -2023,7 +2023,9 @@ TEST(DiagnoseLoop, AKilledDiagnosisResumesToTheSameDiagnosis) {
     std::vector<bool> tried;
     for (const auto& c : whole["candidates"]) tried.push_back(c["tried"].get<bool>());
     EXPECT_EQ(tried, (std::vector<bool>{true, !budget})) << whole["candidates"].dump();
-    if (budget) EXPECT_LE(whole["simulations"].get<long>(), 72);
+    if (budget) {
+      EXPECT_LE(whole["simulations"].get<long>(), 72);
+    }
     // what the resumed session simulated itself: less than the whole, the rest read from the archive
     EXPECT_LT(resumed["session"]["simulated"].get<long>(), whole["session"]["simulated"].get<long>());
     EXPECT_EQ(resumed["simulations"], whole["simulations"]);
