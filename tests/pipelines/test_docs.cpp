@@ -108,6 +108,9 @@ std::string lower(std::string text) {
   return text;
 }
 
+// A line that opens or closes a code fence (```): what lies between is code, not Markdown.
+bool fence_line(const std::string& line) { return line.rfind("```", 0) == 0; }
+
 Page read_page(const fs::path& file) {
   static const std::regex heading("^#{1,6} .*");
   static const std::regex command_span("`demcal((?: [a-z][a-z0-9-]*)*)`");
@@ -122,8 +125,8 @@ Page read_page(const fs::path& file) {
   bool fence = false;
   for (std::size_t i = 0; i < lines.size(); ++i) {
     const std::string& line = lines[i];
-    if (line.rfind("```", 0) == 0) fence = !fence;
-    if (fence || line.rfind("```", 0) == 0) continue;
+    if (fence_line(line)) fence = !fence;
+    if (fence || fence_line(line)) continue;
     if (std::regex_match(line, heading)) {
       current.clear();
       if (lower(line).find("options") == std::string::npos) continue;
@@ -190,7 +193,7 @@ std::set<std::string> heading_anchors(const fs::path& file) {
   std::map<std::string, int> seen;
   bool fence = false;
   for (std::string line; std::getline(in, line);) {
-    if (line.rfind("```", 0) == 0) fence = !fence;
+    if (fence_line(line)) fence = !fence;
     if (fence || line.rfind('#', 0) != 0) continue;
     const std::size_t text = line.find_first_not_of('#');
     if (text == std::string::npos || line[text] != ' ') continue;
@@ -298,7 +301,7 @@ TEST(Docs, EveryLinkBetweenPagesReachesItsFileAndHeading) {
     int number = 0;
     for (std::string line; std::getline(in, line);) {
       ++number;
-      if (line.rfind("```", 0) == 0) fence = !fence;
+      if (fence_line(line)) fence = !fence;
       if (fence) continue;
       for (std::sregex_iterator it(line.begin(), line.end(), link), end; it != end; ++it) {
         const std::string target = (*it)[1].str();
