@@ -88,7 +88,7 @@ void setup(CLI::App& app) {
   sub->add_option("--union-rounds", o.union_rounds,
                   "Rounds of the union search after the candidates' calibrations: one emulator of the curves over "
                   "the base and every candidate's parameters, each round simulating its best point for each "
-                  "candidate (0 = none)")
+                  "candidate, more where the workers outnumber the candidates (0 = none)")
       ->capture_default_str();
   sub->add_option("--pair-rounds", o.pair_rounds,
                   "Rounds of the pair search where no effect passes alone and the base misses the curves: the "

@@ -88,6 +88,8 @@ class CaseRunner {
   // every hardware thread), a lone set's cases side by side; the evaluations in the order asked,
   // the same as evaluating the sets one by one. Throws the first (in that order) that throws.
   std::vector<Evaluation> evaluate_all(const std::vector<RunRequest>& requests);
+  // The sets evaluate_all simulates at once.
+  int workers() const { return workers_; }
   // The two halves of evaluate_all: the simulations, and the residuals of one set's simulated cases.
   std::vector<std::vector<CasePrediction>> simulate_all(const std::vector<RunRequest>& requests);
   Evaluation score(const CampaignConfig& config, std::vector<CasePrediction> cases,

@@ -1,8 +1,8 @@
 // Stage 4b of the diagnosis, the union search (DiagnoseOptions::union_rounds): one emulator of the
 // curves over the base parameters and every calibrated candidate's (UnionLayout), trained on every
-// archived run of those models, searched for each candidate from many starts; the best point of
-// each simulated per round, and the best of a candidate's proposals kept where it fits better than
-// its calibration did.
+// archived run of those models, searched for each candidate from many starts; the best points of
+// each simulated per round (one per candidate, more where the workers outnumber the candidates),
+// and the best of a candidate's proposals kept where it fits better than its calibration did.
 #include "diagnose_internal.hpp"
 
 #include "demcal/pipelines/backend.hpp"
@@ -148,6 +148,10 @@ constexpr double kFirstStep = 0.125, kLastStep = 1.0 / 512;
 // A proposal closer than this (unit-cube distance over the model's coordinates) to a run of the
 // model is not simulated again: the next best is taken.
 constexpr double kSeparation = 1e-3;
+// A candidate's further proposals of one round keep this far from its earlier ones (the pair
+// search's first trust-region half-width): another valley of the emulator, not a neighbour of the
+// first point, which the next round's emulator will have learnt about.
+constexpr double kRoundSeparation = 0.1;
 // Other targets of an effect that the pair search takes (DiagnosisRun::probed_targets), those whose
 // best probes came closest: each adds a pair per partner, and a joint gap has eight targets.
 constexpr std::size_t kOtherTargets = 2;
@@ -252,10 +256,13 @@ void compass_search(const Emulator& emulator, const std::vector<Eigen::Index>& c
 // Where the emulator puts the best point of the models `on` switched on together within `box`:
 // random points over their coordinates and `starts` (clipped into the box) scored, the best
 // kLocalStarts refined; the best refined point at least kSeparation from every point of `taken` (its
-// runs and proposals so far). Empty when every refined point is taken.
+// runs and proposals so far). A further proposal of the round keeps kRoundSeparation from every
+// point of `this_round` too, and where every refined point lies in their valleys it is the best
+// scored point that does not. Empty when every point is taken.
 Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, const std::vector<int>& on,
                         const std::vector<Eigen::VectorXd>& starts, const std::vector<Eigen::VectorXd>& taken,
-                        std::mt19937_64& rng, double& predicted, const Box& box) {
+                        std::mt19937_64& rng, double& predicted, const Box& box,
+                        const std::vector<Eigen::VectorXd>& this_round = {}) {
   const std::vector<Eigen::Index> coordinates = layout.coordinates(on);
   std::vector<std::pair<double, Eigen::VectorXd>> scored;
   for (const auto& s : starts) {
@@ -270,17 +277,22 @@ Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, con
     scored.emplace_back(emulator.fitness(x), x);
   }
   std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<std::pair<double, Eigen::VectorXd>> unrefined;
+  if (!this_round.empty()) unrefined.assign(scored.begin() + std::min<std::size_t>(scored.size(), kLocalStarts), scored.end());
   scored.resize(std::min<std::size_t>(scored.size(), kLocalStarts));
   for (auto& [value, x] : scored) compass_search(emulator, coordinates, box, x, value);
   std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  scored.insert(scored.end(), unrefined.begin(), unrefined.end());
   const auto distance = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
     double sum = 0;
     for (const Eigen::Index k : coordinates) sum += (a(k) - b(k)) * (a(k) - b(k));
     return std::sqrt(sum);
   };
+  const auto near = [&](const Eigen::VectorXd& x, const std::vector<Eigen::VectorXd>& points, double separation) {
+    return std::any_of(points.begin(), points.end(), [&](const Eigen::VectorXd& t) { return distance(x, t) < separation; });
+  };
   for (const auto& [value, x] : scored) {
-    if (std::any_of(taken.begin(), taken.end(), [&, &x = x](const Eigen::VectorXd& t) { return distance(x, t) < kSeparation; }))
-      continue;
+    if (near(x, taken, kSeparation) || near(x, this_round, kRoundSeparation)) continue;
     predicted = value;
     return x;
   }
@@ -487,8 +499,11 @@ void search_union(DiagnosisRun& run) {
   std::vector<Best> best(models.size());
   std::vector<long> proposed(models.size(), 0);
   std::vector<int> rounds(models.size(), 0);
+  // Points per candidate and round: every worker simulates, the candidates sharing them alike.
+  const std::size_t candidates = models.size() - 1;
+  const std::size_t per_candidate = std::max<std::size_t>(1, static_cast<std::size_t>(run.runner.workers()) / candidates);
   for (int round = 1; round <= options.union_rounds; ++round) {
-    const long wanted = static_cast<long>(models.size() - 1) * static_cast<long>(models.front().cases.size());
+    const long wanted = static_cast<long>(candidates * per_candidate) * static_cast<long>(models.front().cases.size());
     if (run.within_budget(wanted) < wanted) break;
     bool trained = false;
     u.model_time([&] { trained = u.emulator.train(u.rows); });
@@ -503,21 +518,26 @@ void search_union(DiagnosisRun& run) {
       if (fit.size() == 0) continue;
       std::vector<Eigen::VectorXd> taken;
       const std::vector<Eigen::VectorXd> starts = u.starts({m.index}, fit, taken);
-      double predicted = 0;
-      Eigen::VectorXd x;
-      u.model_time([&] {
-        x = propose(u.emulator, u.layout, {m.index}, starts, taken, u.rng, predicted, Box::whole(u.layout.dimension()));
-      });
-      if (x.size() == 0) continue;
-      const std::map<std::string, double> set = complete_parameters(m.fitted, u.layout.parameters(m.index, x));
-      points.push_back(x);
-      sets.push_back(set);
-      of_model.push_back(i);
-      requests.push_back({&m.extended->config, set, &run.base.residuals});
-      progress(options, "union search, round " + std::to_string(round) + ": base + " + m.candidate->effect +
-                            " predicted at fitness " + format_number(predicted, 4) + " by an emulator of " +
-                            std::to_string(u.rows.size()) + " runs over " + std::to_string(u.layout.dimension()) +
-                            " parameters");
+      std::vector<Eigen::VectorXd> this_round;
+      for (std::size_t k = 0; k < per_candidate; ++k) {
+        double predicted = 0;
+        Eigen::VectorXd x;
+        u.model_time([&] {
+          x = propose(u.emulator, u.layout, {m.index}, starts, taken, u.rng, predicted, Box::whole(u.layout.dimension()),
+                      this_round);
+        });
+        if (x.size() == 0) break;
+        this_round.push_back(x);
+        const std::map<std::string, double> set = complete_parameters(m.fitted, u.layout.parameters(m.index, x));
+        points.push_back(x);
+        sets.push_back(set);
+        of_model.push_back(i);
+        requests.push_back({&m.extended->config, set, &run.base.residuals});
+        progress(options, "union search, round " + std::to_string(round) + ": base + " + m.candidate->effect +
+                              " predicted at fitness " + format_number(predicted, 4) + " by an emulator of " +
+                              std::to_string(u.rows.size()) + " runs over " + std::to_string(u.layout.dimension()) +
+                              " parameters");
+      }
     }
     if (requests.empty()) break;
     const std::vector<Evaluation> evaluations = run.runner.evaluate_all(requests);
@@ -525,7 +545,7 @@ void search_union(DiagnosisRun& run) {
       const std::size_t i = of_model[j];
       const UnionModel& m = models[i];
       ++proposed[i];
-      ++rounds[i];
+      if (j == 0 || of_model[j - 1] != i) ++rounds[i];
       const Evaluation& e = evaluations[j];
       if (!e.ok) continue;
       u.add_row(e, points[j], {m.index}, m.fitted, m.cases);

@@ -1700,6 +1700,29 @@ TEST(DiagnoseLoop, TheUnionSearchProposesAPointPerCandidateEachRound) {
   EXPECT_GT(union_runs, 0);
 }
 
+// Where the workers outnumber the candidates, each round fills them: one candidate on two workers
+// gets two points a round (two runs of the round and, where the best of them ran below the
+// calibration's fit, its run and re-runs).
+TEST(DiagnoseLoop, TheUnionSearchFillsTheWorkersWhereTheyOutnumberTheCandidates) {
+  const fs::path dir = test_support::fresh_dir("diagnose", "union-fill");
+  json j = small_search_campaign(dir, "union-fill");
+  j["backend"] = {{"type", "threads"}, {"threads", 2}};
+  DiagnoseOptions o = small_search_options(dir / "out", {"support-compliance"});
+  o.union_rounds = 3;
+  o.continued_simulations = 0;
+  const Diagnosis d = run_diagnosis(campaign_from_json(j, dir.string(), "union-fill.json"), o);
+  ASSERT_EQ(d.status, CampaignStatus::completed) << d.message;
+  ASSERT_EQ(d.candidates.size(), 1u);
+  const UnionSearch& u = d.candidates.front().union_search;
+  ASSERT_EQ(u.rounds, 3);
+  if (std::isnan(u.error_found)) {
+    EXPECT_EQ(u.simulations, 2 * 3);
+  } else {
+    EXPECT_GT(u.simulations, 2 * 3);
+    EXPECT_LE(u.simulations, 2 * 3 + 1 + o.scatter_runs);
+  }
+}
+
 // Without a total budget the calibrations of a stage (the candidates and their close targets, the
 // searches continued, the removal checks) and the bounds' re-fits run side by side; with one, one
 // after another, each taking its budget when it starts. On a budget that never binds the two give

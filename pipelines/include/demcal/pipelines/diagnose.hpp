@@ -334,7 +334,8 @@ struct DiagnoseOptions {
   // docs/diagnose.md, step 4): one emulator of the curves over the base parameters and every
   // calibrated candidate's, each candidate's model switched on or off, trained on every run of the
   // diagnosis; each round searches it for every candidate from many starts and simulates the best
-  // point of each (measured: docs/diagnose.md, step 4b). 0: none.
+  // point of each, and where the workers outnumber the candidates each one's share of them with its
+  // next best points (measured: docs/diagnose.md, step 4b). 0: none.
   int union_rounds = 6;
   // --pair-rounds: rounds of the pair search (PairSearch; docs/diagnose.md, step 8) where no effect
   // passes alone and the base fit misses the curves ("no effect found"): the union search's
