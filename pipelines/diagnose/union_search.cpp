@@ -15,6 +15,7 @@
 #include <limits>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <set>
 
@@ -278,7 +279,9 @@ Eigen::VectorXd propose(const Emulator& emulator, const UnionLayout& layout, con
   }
   std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<std::pair<double, Eigen::VectorXd>> unrefined;
-  if (!this_round.empty()) unrefined.assign(scored.begin() + std::min<std::size_t>(scored.size(), kLocalStarts), scored.end());
+  if (!this_round.empty())
+    unrefined.assign(std::make_move_iterator(scored.begin() + std::min<std::size_t>(scored.size(), kLocalStarts)),
+                     std::make_move_iterator(scored.end()));
   scored.resize(std::min<std::size_t>(scored.size(), kLocalStarts));
   for (auto& [value, x] : scored) compass_search(emulator, coordinates, box, x, value);
   std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
@@ -538,6 +541,7 @@ void search_union(DiagnosisRun& run) {
                               std::to_string(u.rows.size()) + " runs over " + std::to_string(u.layout.dimension()) +
                               " parameters");
       }
+      if (!this_round.empty()) ++rounds[i];
     }
     if (requests.empty()) break;
     const std::vector<Evaluation> evaluations = run.runner.evaluate_all(requests);
@@ -545,7 +549,6 @@ void search_union(DiagnosisRun& run) {
       const std::size_t i = of_model[j];
       const UnionModel& m = models[i];
       ++proposed[i];
-      if (j == 0 || of_model[j - 1] != i) ++rounds[i];
       const Evaluation& e = evaluations[j];
       if (!e.ok) continue;
       u.add_row(e, points[j], {m.index}, m.fitted, m.cases);
