@@ -98,6 +98,19 @@ BENCHMARK(ReferenceArch_effect)
     ->DenseRange(0, static_cast<int>(effect_registry().size()) - 1)
     ->Unit(benchmark::kMillisecond);
 
+// The same for an effect whose tangent stiffness grows, with time_step_stiffening "nodes" (the step
+// follows the touching nodes' stiffening) instead of the default "caps".
+void ReferenceArch_effect_step_follows_nodes(benchmark::State& state, const char* effect) {
+  Scene s = make_arch(ArchOptions{});
+  enable_effect(s, effect, {});
+  s.solver.time_step_stiffening = "nodes";
+  state.SetLabel(std::string(effect) + ", time_step_stiffening nodes");
+  run_scene(state, s, /*any_status=*/true);
+}
+BENCHMARK_CAPTURE(ReferenceArch_effect_step_follows_nodes, joint_closure, "joint-closure")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(ReferenceArch_effect_step_follows_nodes, shear_stiffening, "shear-stiffening")
+    ->Unit(benchmark::kMillisecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();

@@ -24,7 +24,7 @@ have to pass too.
 
 usage: engine_equivalence.py BASELINE_DEMCAL CANDIDATE_DEMCAL [--velocity 0.001] [--members 8]
                              [--scene-flags "arch --contacts-per-joint 15"] [--jobs 2] [--out DIR]
-                             [--permutations 4000] [--alpha 0.05] [--seed 1]
+                             [--permutations 4000] [--alpha 0.05] [--seed 1] [--candidate-solver JSON]
 Exit status 0 when the candidate is inside the baseline's spread, 1 when not.
 """
 import argparse
@@ -58,12 +58,13 @@ def simulate_scene(binary, scene, solver, out_dir):
         return json.load(f)
 
 
-def run(binary, scene, safety_scale, out_dir):
+def run(binary, scene, safety_scale, out_dir, solver=None):
     """Runs `binary simulate` on `scene` with its automatic time step's safety factor scaled by
-    `safety_scale`; returns (forces of the recorded rows, summary)."""
+    `safety_scale` and the solver keys of `solver` set; returns (forces of the recorded rows, summary)."""
     with open(scene) as f:
         safety = json.load(f)["solver"]["time_step_safety"]
-    summary = simulate_scene(binary, scene, {"time_step": 0, "time_step_safety": safety * safety_scale}, out_dir)
+    settings = {"time_step": 0, "time_step_safety": safety * safety_scale, **(solver or {})}
+    summary = simulate_scene(binary, scene, settings, out_dir)
     with open(os.path.join(out_dir, "curves.csv")) as f:
         forces = [float(row["force"]) for row in csv.DictReader(f)]
     return forces, summary
@@ -91,7 +92,11 @@ def main():
     parser.add_argument("--permutations", type=int, default=4000)
     parser.add_argument("--alpha", type=float, default=0.05, help="smallest p-value still called the same physics")
     parser.add_argument("--seed", type=int, default=1, help="seed of the permutations")
+    parser.add_argument("--candidate-solver", default="{}",
+                        help='solver keys set in the candidate\'s runs only, as JSON: one build, two settings '
+                             '(e.g. \'{"time_step_stiffening": "nodes"}\')')
     args = parser.parse_args()
+    candidate_solver = json.loads(args.candidate_solver)
     if args.members < 2:
         parser.error("--members must be at least 2")
 
@@ -110,8 +115,9 @@ def main():
             for k in scales if not (build == "baseline" and k == 0)]
     results = {"baseline": {0: (reference, summary)}, "candidate": {}}
     with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        futures = {pool.submit(run, binary, scene, 1 + k * 1e-14,
-                               os.path.join(out, f"{build}{k:+d}")): (build, k) for build, binary, k in jobs}
+        futures = {pool.submit(run, binary, scene, 1 + k * 1e-14, os.path.join(out, f"{build}{k:+d}"),
+                               candidate_solver if build == "candidate" else None): (build, k)
+                   for build, binary, k in jobs}
         for future in concurrent.futures.as_completed(futures):
             build, k = futures[future]
             results[build][k] = future.result()

@@ -6,7 +6,7 @@ its range against the truth, the error before and after against the noise, simul
 
 usage: refdem_table.py DEMCAL_BINARY OUT_DIR [--records A-control-1,A-support-1,...]
                        [--realisations in_contact:0,all:1,...] [--window common|measured] [--read-only]
-                       [-- FLAGS...]
+                       [--solver KEY=VALUE ...] [-- FLAGS...]
 
 FLAGS after `--` go to every `demcal diagnose` (none: its defaults). Each record gets
 OUT_DIR/<record>/ (campaign.json, the diagnosis); a finished one (diagnosis.json present) is read,
@@ -20,6 +20,9 @@ tests/pipelines/test_support.hpp), in OUT_DIR/<record>/<FACES_K>/; the table the
 record: its verdict on each realisation, how many agree with the first and how many are right, how
 many of the stated ranges hold the truth (over every realisation, parameters with a declared truth),
 and the spread of the simulations and wall time.
+
+--solver KEY=VALUE: a key of the campaign scene's solver (repeatable; numbers as numbers), set
+after the realisation's, e.g. --solver time_step_stiffening=nodes (docs/engine.md, "Integration").
 
 --window: the campaigns' objective window ("common", the paper's, or "measured"; docs/smoothing.md);
 default: the bundled campaigns' own.
@@ -67,13 +70,15 @@ def truth_of(record):
     return TRUTH[record.rsplit("-", 1)[0]]
 
 
-def campaign_for(record, folder, realisation=None, window=None):
+def campaign_for(record, folder, realisation=None, window=None, solver=None):
     geometry = record.split("-")[0]
     with open(os.path.join(DATA, geometry + "-campaign.json")) as f:
         campaign = json.load(f)
     if realisation:
         faces, k = realisation.split(":")
         campaign["scene"]["solver"] = {"time_step_faces": faces, "time_step_safety": 0.5 * (1 + int(k) * 1e-14)}
+    if solver:
+        campaign["scene"].setdefault("solver", {}).update(solver)
     if window:
         campaign.setdefault("objective", {})["window"] = window
     campaign["measured"]["file"] = os.path.abspath(os.path.join(DATA, record + ".csv"))
@@ -84,12 +89,12 @@ def campaign_for(record, folder, realisation=None, window=None):
     return path
 
 
-def diagnose(binary, record, out, flags, realisation=None, window=None, run=True):
+def diagnose(binary, record, out, flags, realisation=None, window=None, run=True, solver=None):
     folder = os.path.join(out, record, realisation.replace(":", "_")) if realisation else os.path.join(out, record)
     result = os.path.join(folder, "diag", "diagnosis.json")
     if run and not os.path.exists(result):
         os.makedirs(folder, exist_ok=True)
-        campaign = campaign_for(record, folder, realisation, window)
+        campaign = campaign_for(record, folder, realisation, window, solver)
         start = time.time()
         with open(os.path.join(folder, "diagnose.log"), "w") as log:
             code = subprocess.run([binary, "diagnose", campaign, "--out", os.path.join(folder, "diag"), "--no-report"] +
@@ -266,17 +271,26 @@ def main():
     parser.add_argument("--realisations", default="")
     parser.add_argument("--window", choices=["common", "measured"])
     parser.add_argument("--read-only", action="store_true")
+    parser.add_argument("--solver", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args(argv)
+    solver = {}
+    for item in args.solver:
+        key, _, value = item.partition("=")
+        try:
+            solver[key] = float(value)
+        except ValueError:
+            solver[key] = value
     run = not args.read_only
     binary = os.path.abspath(args.binary)
     records = args.records.split(",")
-    table = {"flags": flags, "window": args.window}
+    table = {"flags": flags, "window": args.window, "solver": solver}
     if args.realisations:
         table["realisations"] = args.realisations.split(",")
-        table["rows"] = {r: [dict(judged(r, diagnose(binary, r, args.out, flags, x, args.window, run)), realisation=x)
+        table["rows"] = {r: [dict(judged(r, diagnose(binary, r, args.out, flags, x, args.window, run, solver)), realisation=x)
                              for x in table["realisations"]] for r in records}
     else:
-        table["rows"] = [judged(r, diagnose(binary, r, args.out, flags, window=args.window, run=run)) for r in records]
+        table["rows"] = [judged(r, diagnose(binary, r, args.out, flags, window=args.window, run=run, solver=solver))
+                         for r in records]
     if run:
         with open(os.path.join(args.out, "table.json"), "w") as f:
             json.dump(table, f, indent=2)

@@ -30,6 +30,9 @@ struct NodeForces {
   // N by which the trial shear exceeded the limit (0 while sticking): the node slid excess / (ks A)
   // in this step. The joint's slip report sums it and divides once (Engine::apply_pair_sums).
   double excess_shear = 0;
+  // Pa/m by which the node's tangent stiffnesses exceed the group's kn and ks (joint-closure,
+  // shear-stiffening; 0 for the plain law), for the time step's bound (Engine::critical_time_step).
+  double stiffening_normal = 0, stiffening_shear = 0;
 };
 
 // Mohr-Coulomb, no cohesion, no tension: Fn = kn A pen; Fs incremental with ks A, capped at Fn tan(phi).
@@ -109,7 +112,10 @@ class EffectLaw {
       return f;
     }
     f.normal = stress * k.area;
-    const double ks_area = ks_ * stiffening_.factor(stress) * k.area;
+    const double shear_factor = stiffening_.factor(stress);
+    const double ks_area = ks_ * shear_factor * k.area;
+    f.stiffening_normal = closure_.tangent_excess(elastic);
+    f.stiffening_shear = ks_ * (shear_factor - 1);
     const double trial = shear_state - ks_area * k.shear_increment;
     const double tan_phi = softening_.tan_friction(h.slip);
     double limit = tan_phi * f.normal + (h.bonded ? bond_.cohesive_force(k.area) : 0.0);

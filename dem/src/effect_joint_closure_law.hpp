@@ -26,6 +26,14 @@ class ClosureLaw {
     if (d <= closure_switch_) return kn_ * d / (1 - d / closure_max_);
     return stress_switch_ + JointMaterial::kClosureStiffening * kn_ * (d - closure_switch_);
   }
+  // The tangent stiffness dsigma/dd above kn (Pa/m) at an elastic closure d (m): kn ((1 -
+  // d/closure_max)^-2 - 1) on the hyperbola, (kClosureStiffening - 1) kn beyond it, 0 while off or open.
+  double tangent_excess(double d) const {
+    if (closure_max_ <= 0 || d <= 0) return 0;
+    if (d > closure_switch_) return (JointMaterial::kClosureStiffening - 1) * kn_;
+    const double open = 1 - d / closure_max_;
+    return kn_ * (1 / (open * open) - 1);
+  }
   // Inverse of normal_stress for a compressive stress s >= 0.
   double elastic_closure(double s) const {
     if (closure_max_ <= 0) return s / kn_;

@@ -1,7 +1,7 @@
 // shear-stiffening's law (effect shear-stiffening, effect_shear_stiffening.cpp), for the contact law
 // (contact_law.hpp): the factor on a node's shear stiffness at normal stress s, 1 + s / stress,
-// at most JointMaterial::kShearStiffening (so that the explicit step's bound holds); 1 while off or
-// in tension.
+// at most JointMaterial::kShearStiffening (which bounds how short the explicit step can become); 1
+// while off or in tension.
 #pragma once
 
 #include "demcal/dem/scene.hpp"

@@ -284,6 +284,9 @@ void validate_solver(const SolverSettings& solver, const std::string& s) {
   require_non_negative(solver.time_step, s + "solver.time_step");
   if (solver.time_step_faces != "all" && solver.time_step_faces != "in_contact")
     throw SceneError(s + "solver.time_step_faces", "must be all or in_contact, got '" + solver.time_step_faces + "'");
+  if (solver.time_step_stiffening != "caps" && solver.time_step_stiffening != "nodes")
+    throw SceneError(s + "solver.time_step_stiffening",
+                     "must be caps or nodes, got '" + solver.time_step_stiffening + "'");
   require_finite(solver.density_scaling, s + "solver.density_scaling");
   if (solver.density_scaling < 1)
     throw SceneError(s + "solver.density_scaling", "must be >= 1, got " + format_number(solver.density_scaling, 10));
@@ -428,6 +431,7 @@ void read_solver(const ObjectReader& c, SolverSettings& sv) {
   sv.time_step_safety = c.number("time_step_safety", sv.time_step_safety);
   sv.time_step = c.number("time_step", sv.time_step);
   sv.time_step_faces = c.string("time_step_faces", sv.time_step_faces);
+  sv.time_step_stiffening = c.string("time_step_stiffening", sv.time_step_stiffening);
   sv.density_scaling = c.number("density_scaling", sv.density_scaling);
   sv.equilibrium_ratio = c.number("equilibrium_ratio", sv.equilibrium_ratio);
   sv.max_equilibrium_time = c.number("max_equilibrium_time", sv.max_equilibrium_time);
@@ -563,6 +567,8 @@ json scene_to_json(const Scene& scene) {
   // Always written: the default changed from "all" to "in_contact", so a scene's hash (the archive's
   // key of its runs) must tell the two apart.
   j["solver"]["time_step_faces"] = sv.time_step_faces;
+  if (sv.time_step_stiffening != SolverSettings{}.time_step_stiffening)
+    j["solver"]["time_step_stiffening"] = sv.time_step_stiffening;
   const Loading& l = scene.loading;
   j["loading"] = {{"type", l.type}};
   if (l.type != "none")

@@ -62,6 +62,11 @@ struct Body {
   double spring_x = 0, spring_y = 0, spring_r = 0;
   bool counts_weight = true;  // part of the equilibrium reference weight (free blocks of the scene)
   double radius = 0;  // largest vertex distance from the centroid
+  // The time step's bound (Engine::critical_time_step): the stiffness of the faces that count, at
+  // the groups' kn and ks (N/m, translation; N m/rad, rotation), and this step's excess of the
+  // touching nodes' tangent stiffnesses over them (joint-closure, shear-stiffening).
+  double face_translation = 0, face_rotation = 0;
+  double stiffening_translation = 0, stiffening_rotation = 0;
   Vec2 box_min = Vec2::Zero(), box_max = Vec2::Zero();
 
   // cos and sin of `angle` (every block starts at angle 0), kept up to date by turn().
@@ -173,6 +178,12 @@ class Engine {
     sat_scratch_.assign(max_vertices_, 0.0);
     const bool automatic = scene_.solver.time_step <= 0;
     step_follows_contacts_ = automatic && scene_.solver.time_step_faces == "in_contact";
+    step_follows_stiffening_ =
+        automatic && scene_.solver.time_step_stiffening == "nodes" &&
+        std::any_of(groups_.begin(), groups_.end(), [](const GroupLaw& g) {
+          return g.material.closure_on() || g.material.shear_stiffening_on();
+        });
+    if (automatic) face_stiffness();
     dt_ = automatic ? critical_time_step() * scene_.solver.time_step_safety : scene_.solver.time_step;
   }
 
@@ -184,7 +195,18 @@ class Engine {
   void build_groups();
   void setup_loading();
   void setup_gap();
+  void face_stiffness();  // each body's face_translation and face_rotation
   double critical_time_step() const;
+  // A touching node's tangent stiffening (Pa/m over area m^2, at `point`, along normal n and
+  // tangent t) added to both blocks' bound of this step.
+  void add_stiffening(Body& a, Body& b, const Vec2& point, const Vec2& n, const Vec2& t, double area,
+                      double normal, double shear) {
+    for (Body* body : {&a, &b}) {
+      const Vec2 r = point - body->position;
+      body->stiffening_translation += area * (normal + shear);
+      body->stiffening_rotation += area * (normal * std::pow(cross(r, n), 2) + shear * std::pow(cross(r, t), 2));
+    }
+  }
   // Marks a body's edge as in contact when the step follows the contacts; a first mark makes the
   // step be estimated again.
   void note_edge_in_contact(Body& body, int edge) {
@@ -272,6 +294,7 @@ class Engine {
   double margin_ = 0;
   double dt_ = 0;
   bool step_follows_contacts_ = false;  // the automatic step over the faces in contact (time_step_faces)
+  bool step_follows_stiffening_ = false;  // the automatic step at the nodes' tangent stiffnesses, each step
   bool contact_edges_changed_ = false;  // an edge was first marked in contact in this step
   double max_weight_ = 0;
   bool loading_stage_ = false;
@@ -408,20 +431,22 @@ void Engine::setup_loading() {
 
 // Upper bound of the highest natural frequency per body: every face marked in contact (every face
 // of a block with none marked, so every face with time_step_faces "all") in full contact with the
-// stiffest group (trace of the 3x3 stiffness over the inertia), doubled for two-body coupling.
-double Engine::critical_time_step() const {
+// stiffest group (trace of the 3x3 stiffness over the inertia), doubled for two-body coupling. A
+// group's closure and shear stiffening count at their caps (16 kn, 16 ks) on every face, or with
+// time_step_stiffening "nodes" at kn and ks, each step adding the touching nodes' tangent stiffness
+// above them (stiffening_translation, stiffening_rotation): the bound follows the stiffening where
+// it happens.
+void Engine::face_stiffness() {
+  const bool caps = !step_follows_stiffening_;
   double kn = 0, ks = 0;
   for (const auto& g : groups_) {
-    // Hyperbolic closure stiffens the joint up to kClosureStiffening x kn.
-    const double stiffening = g.material.closure_on() ? JointMaterial::kClosureStiffening : 1.0;
-    kn = std::max(kn, stiffening * g.material.normal_stiffness);
-    // So does shear stiffening, ks up to kShearStiffening x ks.
-    const double shear_stiffening = g.material.shear_stiffening_on() ? JointMaterial::kShearStiffening : 1.0;
-    ks = std::max(ks, shear_stiffening * g.material.shear_stiffness);
+    const double closure = caps && g.material.closure_on() ? JointMaterial::kClosureStiffening : 1.0;
+    kn = std::max(kn, closure * g.material.normal_stiffness);
+    const double shear = caps && g.material.shear_stiffening_on() ? JointMaterial::kShearStiffening : 1.0;
+    ks = std::max(ks, shear * g.material.shear_stiffness);
   }
-  double omega_squared = 0;
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
-    const Body& b = bodies_[i];
+    Body& b = bodies_[i];
     if (b.fixed) continue;
     double k_translation = 0, k_rotation = 0;
     const std::size_t n = b.local.size();
@@ -444,8 +469,17 @@ double Engine::critical_time_step() const {
       k_translation += actuator_stiffness_;
       k_rotation += actuator_stiffness_ * std::pow(cross(actuator_point_.local, actuator_direction_), 2);
     }
-    double w2 = k_translation / b.inertial_mass;
-    if (!b.fixed_rotation) w2 += k_rotation / b.inertial_inertia;
+    b.face_translation = k_translation;
+    b.face_rotation = k_rotation;
+  }
+}
+
+double Engine::critical_time_step() const {
+  double omega_squared = 0;
+  for (const Body& b : bodies_) {
+    if (b.fixed) continue;
+    double w2 = (b.face_translation + b.stiffening_translation) / b.inertial_mass;
+    if (!b.fixed_rotation) w2 += (b.face_rotation + b.stiffening_rotation) / b.inertial_inertia;
     omega_squared = std::max(omega_squared, 2 * w2);
   }
   return 2.0 / std::sqrt(omega_squared);
@@ -813,6 +847,9 @@ void Engine::process_nodes(Body& a, Body& b, Contact& contact, const GroupLaw& g
     moment += cross(point, force_on_b);
     excess_sum += f.excess_shear;
     length_total += lengths[k];
+    if (step_follows_stiffening_ && f.stiffening_normal + f.stiffening_shear > 0)
+      add_stiffening(a, b, point, layout.normal_ab, layout.tangent_ab, kin.area, f.stiffening_normal,
+                     f.stiffening_shear);
   }
   apply_pair_sums(a, b, contact, touching, resultant, moment, excess_sum, length_total);
 }
@@ -905,6 +942,8 @@ void Engine::compute_forces() {
 
   if (candidates_stale()) sweep_candidates();
   for (Contact& c : contacts_) c.seen = false;
+  if (step_follows_stiffening_)
+    for (Body& b : bodies_) b.stiffening_translation = b.stiffening_rotation = 0;
   work_.resize(candidates_.size());
   std::size_t touching = 0;
   for (Candidate& c : candidates_)
@@ -912,7 +951,8 @@ void Engine::compute_forces() {
         pair_geometry(c.first, c.second, c.contact, work_[touching]))
       ++touching;
   for (std::size_t i = 0; i < touching; ++i) pair_forces(work_[i]);
-  if (contact_edges_changed_) dt_ = critical_time_step() * scene_.solver.time_step_safety;
+  if (contact_edges_changed_) face_stiffness();
+  if (contact_edges_changed_ || step_follows_stiffening_) dt_ = critical_time_step() * scene_.solver.time_step_safety;
   contact_edges_changed_ = false;
   first_step_ = false;
   for (Contact& c : contacts_) {

@@ -98,6 +98,50 @@ TEST(JointClosure, PressedBlockFollowsTheHyperbola) {
   EXPECT_GT(r.peak_force, 3 * plain.peak_force);
 }
 
+TEST(JointClosure, TheTimeStepTakesTheCapsOrFollowsTheNodesTangentStiffness) {
+  // The block pressed to half its maximum closure, with shear stiffening: every node of the joint at
+  // closure d has the tangent kn / (1 - d/dmax)^2 and the shear stiffness ks (1 + s / stress). With
+  // time_step_stiffening "nodes" the automatic step is the bound of docs/engine.md with the bottom
+  // face at kn and ks plus each node's excess over them (at its tributary length and moment arm),
+  // and the actuator spring: 0.5 x 2/omega, omega^2 = 2 (k_t/m + k_r/I). 1e-3: the nodes sit half
+  // their penetration below the face and the block tilts by round-off, which moves the arms by less.
+  const double dmax = 1e-4, kn = 1e9, ks = 4e8, stiffening_stress = 1e5, actuator = 1e9;
+  Scene s = pressed(0.5 * dmax, actuator);
+  set_parameter(s, "closure_max", dmax);
+  set_parameter(s, "shear_stiffening_stress", stiffening_stress);
+  ASSERT_EQ(s.solver.time_step_stiffening, "caps");  // the default
+  const Recording capped = simulate(s);
+  ASSERT_EQ(capped.status, RunStatus::completed) << capped.message;
+  s.solver.time_step_stiffening = "nodes";
+  const Recording r = simulate(s);
+  ASSERT_EQ(r.status, RunStatus::completed) << r.message;
+  const double d = r.gauge_values[0].back(), open = 1 - d / dmax;
+  ASSERT_GT(d, 0.4 * dmax);
+  const double excess_kn = kn * (1 / (open * open) - 1);
+  const double excess_ks = ks * std::min(15.0, kn * d / open / stiffening_stress);
+  const int nodes = s.contact.points_per_joint;
+  const double spacing = kLength / (nodes - 1);
+  double second_moment = 0;  // sum of tributary length x^2 over the nodes, x from the face's middle
+  for (int k = 0; k < nodes; ++k) {
+    const double x = -kLength / 2 + k * spacing, length = (k == 0 || k == nodes - 1 ? 0.5 : 1.0) * spacing;
+    second_moment += length * x * x;
+  }
+  const double h = 0.1, arm = h / 2, mass = 2000 * kWidth * kLength * h, inertia = mass * (kLength * kLength + h * h) / 12;
+  const double k_t = kWidth * kLength * (kn + ks + excess_kn + excess_ks) + actuator;
+  const double k_r = kWidth * (kn * std::pow(kLength, 3) / 12 + ks * kLength * arm * arm + excess_kn * second_moment +
+                               excess_ks * kLength * arm * arm);
+  const double expected = 0.5 * 2 / std::sqrt(2 * (k_t / mass + k_r / inertia));
+  EXPECT_NEAR(r.time_step, expected, 1e-3 * expected);
+  // "caps": the face at 16 kn and 16 ks, whatever the closure, 1.4 x shorter here (the actuator's
+  // spring weighs as much as the capped joint in translation).
+  const double capped_t = kWidth * kLength * 16 * (kn + ks) + actuator;
+  const double capped_r = kWidth * 16 * (kn * std::pow(kLength, 3) / 12 + ks * kLength * arm * arm);
+  const double capped_step = 0.5 * 2 / std::sqrt(2 * (capped_t / mass + capped_r / inertia));
+  EXPECT_NEAR(capped.time_step, capped_step, 1e-12 * capped_step);
+  EXPECT_GT(r.time_step, 1.3 * capped_step);
+  EXPECT_NEAR(capped.peak_force, r.peak_force, 0.01 * r.peak_force);  // the same joint, pressed alike
+}
+
 TEST(FrictionSoftening, SlidingResistanceFallsFromPeakToResidualOverTheSlipLength) {
   // A weighted block pushed along its base at the joint's height (no overturning moment, so every
   // node carries W/n and slides together). Slip = displacement - elastic shear F / (ks A). Resistance

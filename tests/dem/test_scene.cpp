@@ -137,6 +137,24 @@ TEST_F(SceneFiles, UnknownTimeStepFacesAreNamed) {
   EXPECT_NE(scene_hash(all), scene_hash(by_default));
 }
 
+TEST_F(SceneFiles, TimeStepStiffeningIsCheckedAndWrittenOnlyWhenNodes) {
+  json j = small_scene();
+  j["solver"] = json::parse(R"({"time_step_stiffening": "node"})");
+  expect_rejected(j.dump(), {"solver.time_step_stiffening", "caps or nodes", "'node'"});
+  // "nodes" round-trips and changes the hash; the default, "caps", is not written, so the scenes
+  // (and archived runs) from before the key keep their hashes.
+  j["solver"]["time_step_stiffening"] = "nodes";
+  const Scene nodes = scene_from_json(j, "nodes");
+  EXPECT_EQ(nodes.solver.time_step_stiffening, "nodes");
+  EXPECT_EQ(scene_to_json(nodes)["solver"]["time_step_stiffening"], "nodes");
+  j["solver"]["time_step_stiffening"] = "caps";
+  const Scene caps = scene_from_json(j, "caps");
+  EXPECT_FALSE(scene_to_json(caps)["solver"].contains("time_step_stiffening"));
+  j["solver"].erase("time_step_stiffening");
+  EXPECT_EQ(scene_hash(scene_from_json(j, "default")), scene_hash(caps));
+  EXPECT_NE(scene_hash(nodes), scene_hash(caps));
+}
+
 TEST_F(SceneFiles, GeneratedSceneRoundTripsAndSimulates) {
   const std::string scene = (dir_ / "arch.json").string();
   CommandResult r = run_demcal("scene arch --voussoirs 9 --contacts-per-joint 5 --max-displacement 0.001 -o " + scene);

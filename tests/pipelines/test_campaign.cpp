@@ -253,9 +253,12 @@ TEST(Campaign, SceneSolverSettingsOverrideTheGeneratedScene) {
     return build_scene(config.cases.front().scene, "solver.json: scene");
   };
   const demcal::dem::Scene plain = scene_of(json::object());
-  const demcal::dem::Scene changed = scene_of({{"time_step_faces", "all"}, {"time_step_safety", 0.4}});
+  const demcal::dem::Scene changed =
+      scene_of({{"time_step_faces", "all"}, {"time_step_safety", 0.4}, {"time_step_stiffening", "nodes"}});
   EXPECT_EQ(plain.solver.time_step_faces, "in_contact");
   EXPECT_EQ(changed.solver.time_step_faces, "all");
+  EXPECT_EQ(plain.solver.time_step_stiffening, "caps");
+  EXPECT_EQ(changed.solver.time_step_stiffening, "nodes");
   EXPECT_EQ(changed.solver.time_step_safety, 0.4);
   EXPECT_EQ(changed.solver.local_damping, plain.solver.local_damping);  // the others kept
   EXPECT_EQ(changed.blocks.size(), plain.blocks.size());
@@ -273,6 +276,8 @@ TEST(Campaign, SceneSolverSettingsOverrideTheGeneratedScene) {
   EXPECT_NE(message({{"time_step_faces", "some"}}).find("solver.time_step_faces: must be all or in_contact, got 'some'"),
             std::string::npos);
   EXPECT_NE(message({{"time_step_safety", 2}}).find("solver.time_step_safety"), std::string::npos);
+  EXPECT_NE(message({{"time_step_stiffening", "tangent"}}).find("solver.time_step_stiffening: must be caps or nodes"),
+            std::string::npos);
   EXPECT_NE(message(json::array()).find("scene.solver: expected a JSON object"), std::string::npos);
 }
 

@@ -169,6 +169,12 @@ struct SolverSettings {
   // whenever a face first comes into contact: 1.31 x larger on the reference arch, the same physics
   // by the round-off test) or "all" (every face from the start, one step for the run).
   std::string time_step_faces = "in_contact";
+  // How the automatic step meets joint closure and shear stiffening, whose tangent stiffness grows
+  // up to 16 kn and 16 ks: "caps" (every face counted at the caps from the first step) or "nodes"
+  // (each step, the faces at kn and ks plus the touching nodes' tangent stiffness above them: the
+  // same physics by the round-off test in 2-3 x fewer steps; docs/engine.md, "Integration").
+  // Written to a scene file only when "nodes", so the hashes of scenes without the key stay theirs.
+  std::string time_step_stiffening = "caps";
   double density_scaling = 1;         // >= 1: inertia multiplied for quasi-static runs (weight unchanged)
   double equilibrium_ratio = 1e-5;    // gravity stage ends when max unbalanced force / max weight < this
   double max_equilibrium_time = 5;    // s of simulated time allowed for the gravity stage

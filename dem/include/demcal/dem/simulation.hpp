@@ -63,7 +63,8 @@ struct Recording {
   double peak_force = 0;              // N, max of `force`
   long steps = 0;                     // time steps in both stages
   long gravity_steps = 0;             // of which in the gravity stage
-  double time_step = 0;               // s, at the end of the run (time_step_faces "in_contact" changes it)
+  double time_step = 0;               // s, at the end of the run (faces coming into contact, joint closure
+                                      // and shear stiffening change it during the run)
   double wall_time_s = 0;
   double max_block_displacement = 0;  // m, largest centroid displacement of a free block (from start)
   // Pa, largest normal stress at any contact node in a recorded row (the loading stage): the scale
