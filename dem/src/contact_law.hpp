@@ -31,7 +31,8 @@ struct NodeForces {
   // in this step. The joint's slip report sums it and divides once (Engine::apply_pair_sums).
   double excess_shear = 0;
   // Pa/m by which the node's tangent stiffnesses exceed the group's kn and ks (joint-closure,
-  // shear-stiffening; 0 for the plain law), for the time step's bound (Engine::critical_time_step).
+  // shear-stiffening), for the time step's bound (Engine::critical_time_step); 0 for the plain law
+  // and for an EffectLaw that does not report tangents.
   double stiffening_normal = 0, stiffening_shear = 0;
 };
 
@@ -83,8 +84,9 @@ struct NodeHistory {
 // to the same instructions as with the arithmetic written here, only the members' offsets differ.
 class EffectLaw {
  public:
-  explicit EffectLaw(const JointMaterial& m)
-      : ks_(m.shear_stiffness), closure_(m), stiffening_(m), softening_(m), bond_(m), cap_(m) {}
+  // `tangents`: fill NodeForces' stiffening fields (only a time step that follows them reads them).
+  EffectLaw(const JointMaterial& m, bool tangents)
+      : ks_(m.shear_stiffness), tangents_(tangents), closure_(m), stiffening_(m), softening_(m), bond_(m), cap_(m) {}
 
   bool bonds() const { return bond_.on(); }
 
@@ -114,8 +116,10 @@ class EffectLaw {
     f.normal = stress * k.area;
     const double shear_factor = stiffening_.factor(stress);
     const double ks_area = ks_ * shear_factor * k.area;
-    f.stiffening_normal = closure_.tangent_excess(elastic);
-    f.stiffening_shear = ks_ * (shear_factor - 1);
+    if (tangents_) {
+      f.stiffening_normal = closure_.tangent_excess(elastic);
+      f.stiffening_shear = ks_ * (shear_factor - 1);
+    }
     const double trial = shear_state - ks_area * k.shear_increment;
     const double tan_phi = softening_.tan_friction(h.slip);
     double limit = tan_phi * f.normal + (h.bonded ? bond_.cohesive_force(k.area) : 0.0);
@@ -140,6 +144,7 @@ class EffectLaw {
 
  private:
   double ks_;
+  bool tangents_;
   ClosureLaw closure_;
   ShearStiffening stiffening_;
   FrictionSoftening softening_;

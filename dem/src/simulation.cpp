@@ -178,11 +178,6 @@ class Engine {
     sat_scratch_.assign(max_vertices_, 0.0);
     const bool automatic = scene_.solver.time_step <= 0;
     step_follows_contacts_ = automatic && scene_.solver.time_step_faces == "in_contact";
-    step_follows_stiffening_ =
-        automatic && scene_.solver.time_step_stiffening == "nodes" &&
-        std::any_of(groups_.begin(), groups_.end(), [](const GroupLaw& g) {
-          return g.material.closure_on() || g.material.shear_stiffening_on();
-        });
     if (automatic) face_stiffness();
     dt_ = automatic ? critical_time_step() * scene_.solver.time_step_safety : scene_.solver.time_step;
   }
@@ -382,8 +377,15 @@ void Engine::build_bodies() {
 }
 
 void Engine::build_groups() {
+  // Set first: the effect laws report their tangents only for a step that follows them.
+  step_follows_stiffening_ =
+      scene_.solver.time_step <= 0 && scene_.solver.time_step_stiffening == "nodes" &&
+      std::any_of(scene_.joint_groups.begin(), scene_.joint_groups.end(), [](const auto& group) {
+        return group.second.closure_on() || group.second.shear_stiffening_on();
+      });
   for (const auto& [name, material] : scene_.joint_groups)
-    groups_.push_back({name, material, MohrCoulombLaw(material), EffectLaw(material), material.plain()});
+    groups_.push_back({name, material, MohrCoulombLaw(material), EffectLaw(material, step_follows_stiffening_),
+                       material.plain()});
 }
 
 void Engine::setup_gap() {

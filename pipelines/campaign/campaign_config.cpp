@@ -49,9 +49,10 @@ std::string file_hash(const std::string& path) {
 }
 
 // The scene file's solver keys (dem::scene_from_json reads them when the scene is built).
-const std::set<std::string> kSolverKeys{"local_damping", "time_step_safety", "time_step", "time_step_faces", "time_step_stiffening",
-                                        "density_scaling", "equilibrium_ratio", "max_equilibrium_time",
-                                        "max_time", "collapse_displacement", "max_velocity"};
+const std::set<std::string> kSolverKeys{"local_damping",         "time_step_safety",     "time_step",
+                                        "time_step_faces",       "time_step_stiffening", "density_scaling",
+                                        "equilibrium_ratio",     "max_equilibrium_time", "max_time",
+                                        "collapse_displacement", "max_velocity"};
 
 // `value`'s JSON, or nullopt (left out) when it is empty.
 template <class T>
