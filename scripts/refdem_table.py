@@ -29,8 +29,10 @@ default: the bundled campaigns' own.
 
 "Right": every declared effect named and no other; for a control, "no effect needed". An effect
 record whose diagnosis says "no effect needed" with the base fit within the noise (no candidate
-calibrated, or the final fit, a base re-fitted by the removal check, at most the noise) is counted
-right too, and marked so (the README: an effect may not stand above the noise for a calibrated base).
+calibrated, or the final fit, a base re-fitted by the removal check, at most the level at which the
+loop calls a fit explained: removal_checks' explained_level, the noise in a diagnosis.json without
+it) is counted right too, and marked so (the README: an effect may not stand above the noise for a
+calibrated base).
 A realisation table marks each verdict that is not right: "(wrong)" where it names an effect the
 record does not declare, "(k of n declared)" where it names some of the declared effects and no
 other, "(missed)" where it names none.
@@ -159,10 +161,12 @@ def judged(record, d):
                 "within_noise": False}
     chosen = d["chosen"]
     noise = (sum(v * v for v in d["noise"].values()) / max(1, len(d["noise"]))) ** 0.5
-    # the diagnosis's own rule (a base fit within the noise and scatter calibrates no candidate), or a
-    # final fit within the noise with no effect (a base re-fitted by the removal check)
+    # the diagnosis's own rule: a base fit within the noise and scatter calibrates no candidate, and a
+    # base re-fitted by the removal check is judged against the same level
+    dropped = [r for r in d.get("removal_checks", []) if r.get("dropped")]
+    level = dropped[-1].get("explained_level") if dropped else None
     within_noise = d["outcome"] == "no_effect_needed" and (
-        not any(c["tried"] for c in d["candidates"]) or d["error_after"] <= noise)
+        not any(c["tried"] for c in d["candidates"]) or d["error_after"] <= (noise if level is None else level))
     right = (d["outcome"] == "no_effect_needed" if not declared else sorted(chosen) == sorted(declared)) or (
         declared and within_noise)
     return {"record": record, "declared": declared, "outcome": d["outcome"], "chosen": chosen,

@@ -134,7 +134,7 @@ void setup(CLI::App& app) {
                   "Runs per re-fit of the other parameters at a value the bounds' check rules out (0 = no re-fit)")
       ->capture_default_str();
   sub->add_flag("--no-removal-check", flags->no_removal_check,
-                "Skip the removal check: each effect added re-fitted without (the base alone for one), and dropped when that costs no evidence");
+                "Skip the removal check: each effect added re-fitted without (the base alone for one), and dropped when that costs no evidence or leaves the fit explained");
   sub->add_flag("--no-tentative-effect", flags->no_tentative_effect,
                 "Where no effect passes alone, do not add the best one tentatively to look for a second that passes with it");
   sub->add_option("--max-effects", o.max_effects,

@@ -358,9 +358,10 @@ std::string listed_coverage(const std::vector<std::pair<std::string, double>>& s
 void add_further_effects(DiagnosisRun& run);           // 8. further_effects.cpp
 // 8b. An undecided verdict (effects tied, or no choice reached by --verdict-share of the resamples)
 // gets the removal check of its closest fit: the base model alone re-fitted from the best-fitting
-// candidate's set. Where that costs no evidence, the candidates' searches only found a better base
-// than the base calibration did, and the diagnosis says so: no effect needed (or none found, above
-// twice the floor). The verdict no longer hangs on where the base calibration happened to stop.
+// candidate's set. Where the effect is no longer needed (removal_criteria), the candidates' searches
+// only found a better base than the base calibration did, and the diagnosis says so: no effect
+// needed (or none found, above twice the floor). The verdict no longer hangs on where the base
+// calibration happened to stop.
 void check_undecided_leader(DiagnosisRun& run);       // further_effects.cpp
 // The counts and times of `run` into its diagnosis, then diagnosis.json and report.md in its folder.
 void finish_diagnosis(DiagnosisRun& run, double wall_time_s);
@@ -374,6 +375,9 @@ std::string fitted_effect_parameters(const EffectCandidate& c, const Diagnosis& 
 // `note` (a sentence with its leading space, "" = none) appended to the verdict and to its notes;
 // the verdict before the first note is its conclusion.
 void add_note(Diagnosis& d, const std::string& note);
+// The advice of a longer search (more_search_note) taken back from the verdict and its notes, for a
+// verdict that a later check settled; `per_candidate` as when it was given.
+void withdraw_search_advice(Diagnosis& d, long per_candidate);
 
 
 }  // namespace demcal::pipelines::detail

@@ -148,17 +148,33 @@ void settle_on_base_alone(Diagnosis& d, const DiagnosisRun& run, const std::stri
   d.chosen.clear();
   d.outcome = d.error_after > 2 * floor_of(d, run.options) ? DiagnosisOutcome::unexplained
                                                            : DiagnosisOutcome::no_effect_needed;
+  d.frequency.verdict = d.frequency.none;  // the verdict's choice is now no effect
+  if (d.outcome == DiagnosisOutcome::no_effect_needed) withdraw_search_advice(d, run.per_candidate);
   d.headline = std::string(d.outcome == DiagnosisOutcome::unexplained ? "No effect found" : "No effect needed") +
                ": the base model re-fitted from the " + effect + " fit reaches " + format_number(d.error_after, 3) +
                " N, so " + why + "; force error " + errors + " → " + format_number(d.error_after, 3) +
                " N against " + format_number(run.noise, 3) + " N of noise.";
 }
 
+// The level (N) at which removal_criteria calls a fit without an effect explained: step 2's.
+double explained_level(const DiagnosisRun& run) { return run.options.noise_level_ratio * floor_of(run.d, run.options); }
+
+// Why a removal check found an effect no longer needed (removal_criteria), for the verdict; `effect`:
+// how the verdict names it ("it", "shear-stiffening, the closest fit,").
+std::string not_needed_because(const Diagnosis::RemovalCheck& check, double evidence, const std::string& effect) {
+  if (check.criterion > -evidence)
+    return "removing " + effect + " costs no evidence: criterion " + format_number(check.criterion, 3);
+  return "the fit without " + effect + " is already explained: " + format_number(check.error_without, 3) + " N against the " +
+         format_number(check.explained_level, 3) + " N below which a base fit needs no effect; criterion " +
+         format_number(check.criterion, 3);
+}
+
 // The removal check of the effects added (Diagnosis::removal_checks): each of `effects` left out in
 // turn, the model with the others (the first alone: the base) calibrated again from the fit with all
-// of them (`full`, its residuals `with_all`); the one whose removal costs least is dropped when it
-// costs no evidence, and the verdict says so with the error without it (after `errors`, the errors
-// of the steps before: "492 → 331 → 133"). One pass: a dropped effect's partners are not checked again.
+// of them (`full`, its residuals `with_all`); the one whose removal costs least is dropped when it is
+// no longer needed (removal_criteria), and the verdict says so with the error without it (after
+// `errors`, the errors of the steps before: "492 → 331 → 133"). One pass: a dropped effect's
+// partners are not checked again.
 void check_removals(DiagnosisRun& run, const std::vector<ModelEffect>& effects, const std::map<std::string, double>& full,
                     const std::vector<ChannelResidual>& with_all, const std::string& errors) {
   Diagnosis& d = run.d;
@@ -184,10 +200,12 @@ void check_removals(DiagnosisRun& run, const std::vector<ModelEffect>& effects, 
   for (std::size_t i = 0; i < effects.size(); ++i) {
     residuals.push_back(std::isfinite(without[i].error) ? without[i].residuals : std::vector<ChannelResidual>{});
     parameters.push_back(effects[i].fit->effect_parameters);
-    d.removal_checks.push_back({effects[i].effect->name, Diagnosis::kNaN, without[i].error, folders[i].string(), false});
+    d.removal_checks.push_back(
+        {effects[i].effect->name, Diagnosis::kNaN, without[i].error, folders[i].string(), false, explained_level(run)});
   }
   int drop = -1;
-  const std::vector<double> criteria = removal_criteria(with_all, residuals, parameters, run.options.evidence, drop);
+  const std::vector<double> criteria =
+      removal_criteria(with_all, residuals, parameters, run.options.evidence, drop, explained_level(run));
   for (std::size_t i = 0; i < criteria.size(); ++i) d.removal_checks[i].criterion = criteria[i];
   if (drop < 0) {
     std::string costs;
@@ -203,8 +221,7 @@ void check_removals(DiagnosisRun& run, const std::vector<ModelEffect>& effects, 
   std::vector<ModelEffect> kept = effects;
   kept.erase(kept.begin() + drop);
   d.error_after = without[k].error;
-  const std::string why = dropped.effect + " dropped again (its removal costs no evidence: criterion " +
-                          format_number(criteria[k], 3) + ")";
+  const std::string why = dropped.effect + " dropped again (" + not_needed_because(dropped, run.options.evidence, "it") + ")";
   const std::string against = " N against " + format_number(run.noise, 3) + " N of noise";
   if (kept.empty()) {
     settle_on_base_alone(d, run, dropped.effect, why, errors);
@@ -363,8 +380,9 @@ void check_undecided_leader(DiagnosisRun& run) {
   int drop = -1;
   const std::vector<double> criterion = removal_criteria(
       leader->residuals, {std::isfinite(without.error) ? without.residuals : std::vector<ChannelResidual>{}},
-      {leader->effect_parameters}, run.options.evidence, drop);
-  d.removal_checks.push_back({leader->effect, criterion.front(), without.error, folder.string(), drop == 0});
+      {leader->effect_parameters}, run.options.evidence, drop, explained_level(run));
+  d.removal_checks.push_back(
+      {leader->effect, criterion.front(), without.error, folder.string(), drop == 0, explained_level(run)});
   if (drop != 0) {
     add_note(d, " Removal check of the closest fit: the base model re-fitted from the " + leader->effect + " fit, in " +
                     folder.string() + ", reaches " + format_number(without.error, 3) + " N, criterion " +
@@ -372,8 +390,9 @@ void check_undecided_leader(DiagnosisRun& run) {
     return;
   }
   d.error_after = without.error;
-  const std::string why = "the undecided effects are not needed (criterion " + format_number(criterion.front(), 3) +
-                          " against that fit, the closest)";
+  const std::string why = "the undecided effects are not needed (" +
+                          not_needed_because(d.removal_checks.back(), run.options.evidence,
+                                             leader->effect + ", the closest fit,") + ")";
   settle_on_base_alone(d, run, leader->effect, why, format_number(d.error_before, 3));
   add_note(d, " Removal check of the closest fit: " + why + "; the model without it, in " + folder.string() +
                   ", fits to " + format_number(d.error_after, 3) + " N.");

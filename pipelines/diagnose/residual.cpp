@@ -251,7 +251,8 @@ std::vector<double> common_effective_points(const std::vector<const std::vector<
 
 std::vector<double> removal_criteria(const std::vector<ChannelResidual>& with_all,
                                      const std::vector<std::vector<ChannelResidual>>& without,
-                                     const std::vector<int>& parameters, double evidence, int& drop) {
+                                     const std::vector<int>& parameters, double evidence, int& drop,
+                                     double explained) {
   if (parameters.size() != without.size())
     throw std::invalid_argument("removal criteria: " + std::to_string(without.size()) + " fits without an effect, " +
                                 std::to_string(parameters.size()) + " parameter counts");
@@ -264,7 +265,8 @@ std::vector<double> removal_criteria(const std::vector<ChannelResidual>& with_al
   for (std::size_t i = 0; i < without.size(); ++i) {
     const bool fitted = without[i].size() == with_all.size() && !with_all.empty();
     criteria.push_back(fitted ? information_criterion_change(without[i], with_all, parameters[i], points) : Diagnosis::kNaN);
-    if (std::isfinite(criteria[i]) && criteria[i] > -evidence && (drop < 0 || criteria[i] > criteria[static_cast<std::size_t>(drop)]))
+    const bool not_needed = criteria[i] > -evidence || (fitted && overall_error(without[i]) <= explained);
+    if (std::isfinite(criteria[i]) && not_needed && (drop < 0 || criteria[i] > criteria[static_cast<std::size_t>(drop)]))
       drop = static_cast<int>(i);
   }
   return criteria;

@@ -222,6 +222,30 @@ TEST(Evidence, AnEffectWhoseRemovalCostsNoEvidenceIsDropped) {
   EXPECT_THROW(removal_criteria(with_all, {fit(31)}, {1, 2}, 10, drop), std::invalid_argument);
 }
 
+// An effect whose removal costs evidence is dropped all the same where the fit without it is
+// explained (its overall error at most the level given, step 2's): a base fit there would have ended
+// the diagnosis at step 2. Above that level, or with no level given, the criterion alone decides.
+TEST(Evidence, AnEffectIsDroppedWhereTheFitWithoutItIsExplained) {
+  auto fit = [](double rms) { return std::vector<ChannelResidual>{channel_of(rms, 100), channel_of(rms, 100)}; };
+  const auto with_all = fit(26);
+  int drop = -2;
+  // 30 N without it, 26 N with it, on 200 points: the effect still pays for its parameter
+  const auto criteria = removal_criteria(with_all, {fit(30)}, {1}, 10, drop);
+  EXPECT_LT(criteria[0], -10);
+  EXPECT_EQ(drop, -1);
+  EXPECT_EQ(removal_criteria(with_all, {fit(30)}, {1}, 10, drop, 30), criteria);  // at the level: explained
+  EXPECT_EQ(drop, 0);
+  removal_criteria(with_all, {fit(30)}, {1}, 10, drop, 29.9);
+  EXPECT_EQ(drop, -1);
+  // of two effects, each model without one explained: the one whose removal costs least
+  const auto both = removal_criteria(with_all, {fit(30), fit(28)}, {1, 1}, 10, drop, 35);
+  EXPECT_GT(both[1], both[0]);
+  EXPECT_EQ(drop, 1);
+  // a failed fit is never explained
+  removal_criteria(with_all, {{}}, {1}, 10, drop, 1e9);
+  EXPECT_EQ(drop, -1);
+}
+
 TEST(Evidence, SignatureScoreNeedsTheRightShapeAndSign) {
   const int n = 300;
   std::vector<double> j1(n), s(n), other(n), residual(n), wrong(n);
@@ -1778,8 +1802,8 @@ TEST(DiagnoseLoop, ABaseFitComparedOverASliverOfAGaugeIsComparedOverItAll) {
 // After an effect is accepted the model with it is the next base: the diagnosis runs again in
 // DIR/with-<effect>/, from the first fit, with the other effect as the only candidate, and reports
 // the step (a second effect added, or a note that none passed there). Each effect added is
-// checked for removal: the model without it calibrated in DIR/without-<effect>/, and one whose
-// removal costs no evidence is dropped from the verdict.
+// checked for removal: the model without it calibrated in DIR/without-<effect>/, and one no longer
+// needed (its removal costs no evidence, or the fit without it is explained) is dropped.
 TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   const fs::path dir = test_support::fresh_dir("diagnose", "steps");
   const json j = small_search_campaign(dir, "steps");
@@ -1838,6 +1862,8 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
   ASSERT_EQ(written["removal_checks"].size(), d.added.size());
   for (std::size_t i = 0; i < d.added.size(); ++i) {
     EXPECT_EQ(d.removal_checks[i].effect, d.added[i].effect);
+    EXPECT_GT(d.removal_checks[i].explained_level, 0);  // step 2's level, the same for each check
+    EXPECT_EQ(written["removal_checks"][i]["explained_level"].get<double>(), d.removal_checks[i].explained_level);
     EXPECT_TRUE(fs::exists(dir / "out" / ("without-" + d.added[i].effect) / "result.json")) << d.added[i].effect;
   }
   if (d.added.front().tentative) {  // it did not pass alone: only with a second effect beside it
@@ -1857,7 +1883,9 @@ TEST(DiagnoseLoop, AnAcceptedEffectIsFollowedByADiagnosisOfTheExtendedModel) {
       EXPECT_EQ(dropped, 1);
       const auto& r = *std::find_if(d.removal_checks.begin(), d.removal_checks.end(),
                                     [](const Diagnosis::RemovalCheck& x) { return x.dropped; });
-      EXPECT_GT(r.criterion, -o.evidence);
+      // no longer needed: its removal costs no evidence, or the fit without it is explained
+      EXPECT_TRUE(r.criterion > -o.evidence || r.error_without <= r.explained_level)
+          << r.criterion << ", " << r.error_without << " N against " << r.explained_level << " N";
       EXPECT_EQ(d.error_after, r.error_without);
       EXPECT_NE(d.headline.find(r.effect + " dropped again"), std::string::npos) << d.headline;
     }

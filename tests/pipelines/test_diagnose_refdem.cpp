@@ -68,16 +68,20 @@ void expect_no_effect_needed(const std::string& record, const Realisation& reali
   if (d.removal_checks.empty()) {
     EXPECT_EQ(d.error_after, d.error_before);
     for (const auto& c : d.candidates) EXPECT_NE(c.verdict, CandidateVerdict::accepted) << c.effect;
-    EXPECT_EQ(d.advised_candidate_simulations, 0);  // a settled verdict advises no longer search
   } else {
     ASSERT_EQ(d.removal_checks.size(), 1u);
     const Diagnosis::RemovalCheck& check = d.removal_checks.front();
     EXPECT_TRUE(check.dropped) << check.effect;
-    EXPECT_GT(check.criterion, -DiagnoseOptions{}.evidence);
+    // no longer needed: its removal costs no evidence, or the base alone re-fitted is explained
+    EXPECT_TRUE(check.criterion > -DiagnoseOptions{}.evidence || check.error_without <= check.explained_level)
+        << check.criterion << ", " << check.error_without << " N against " << check.explained_level << " N";
     EXPECT_EQ(d.error_after, check.error_without);
     EXPECT_TRUE(fs::exists(fs::path(check.folder) / "result.json")) << check.folder;
     EXPECT_NE(d.headline.find("re-fitted from the " + check.effect + " fit"), std::string::npos) << d.headline;
+    EXPECT_EQ(d.frequency.verdict, d.frequency.none);  // the share of the resamples choosing no effect
   }
+  EXPECT_EQ(d.advised_candidate_simulations, 0);  // a settled verdict advises no longer search
+  EXPECT_EQ(d.verdict.find("A longer search"), std::string::npos) << d.verdict;
   EXPECT_LT(d.error_after, 2 * noise) << d.headline;  // the two codes agree to about the noise
 }
 
@@ -166,6 +170,7 @@ TEST_P(RefdemRecord, ACompliantAbutmentIsNamedAndRecovered) {
   EXPECT_FALSE(removal.dropped);
   EXPECT_LT(removal.criterion, -DiagnoseOptions{}.evidence);
   EXPECT_GT(removal.error_without, d.error_after);
+  EXPECT_GT(removal.error_without, removal.explained_level);  // the base alone is not explained
   EXPECT_TRUE(fs::exists(dir / "out" / "without-support-compliance" / "result.json"));
   // each of the effect's parameters checked, the truth inside what the check does not rule out
   ASSERT_EQ(c->bounds.size(), 3u);

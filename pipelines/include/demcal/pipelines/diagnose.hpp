@@ -30,9 +30,10 @@
 //                    others re-fitted where needed);
 //   7. more effects  the model with the accepted effect is the next base (max_effects); then each
 //                    effect added is re-fitted without (the base alone for one: removal_criteria)
-//                    and dropped where its removal costs no evidence; an undecided verdict's
-//                    closest fit is checked so too, and where the base alone re-fitted from it
-//                    does as well, no effect is needed.
+//                    and dropped where no longer needed (its removal costs no evidence, or the
+//                    fit without it is explained); an undecided verdict's closest fit is checked
+//                    so too, and where the base alone re-fitted from it does as well, no effect
+//                    is needed.
 //
 // Outputs: <out>/diagnosis.json (layout in docs/commands/diagnose.md) and <out>/report.md with residual
 // plots before and after, the table of candidates and the verdict in words. Forces in N,
@@ -139,11 +140,16 @@ double information_criterion_change(const std::vector<ChannelResidual>& base,
 // fit failed), and `parameters[i]` its parameter count. Returns each effect's criterion change from
 // `without[i]` to `with_all` (information_criterion_change, every fit counted with the
 // common_effective_points of them all; NaN for an empty fit, an effect that is then kept), and sets
-// `drop` to the effect whose removal costs least when its change does not fall by more than
-// `evidence` (it no longer pays for its parameters), else -1.
+// `drop` to the effect whose removal costs least among those no longer needed, else -1. An effect
+// is no longer needed when its change does not fall by more than `evidence` (it no longer pays for
+// its parameters), or when the fit without it is explained: its overall RMS error at most
+// `explained` (N; the loop's level, noise_level_ratio x error_floor; 0 = the criterion alone). A
+// base fit at that level in step 2 means "no effect needed"; the same fit found by a re-fit says the
+// same, so the verdict does not hang on which search happened to find it.
 std::vector<double> removal_criteria(const std::vector<ChannelResidual>& with_all,
                                      const std::vector<std::vector<ChannelResidual>>& without,
-                                     const std::vector<int>& parameters, double evidence, int& drop);
+                                     const std::vector<int>& parameters, double evidence, int& drop,
+                                     double explained = 0);
 
 // The effective points per channel with which the criterion counts every fit of one diagnosis: on
 // each channel, those of the fit with the lowest RMS error there among `fits` (each a set of
@@ -316,7 +322,7 @@ struct DiagnoseOptions {
   int profile_simulations = 20;
   // --no-removal-check sets false: once the loop stops, each effect added is calibrated again
   // without (the model with the others; the base alone for one, `candidate_simulations` runs each)
-  // and dropped when its removal costs no evidence (Diagnosis::removal_checks).
+  // and dropped when no longer needed (removal_criteria; Diagnosis::removal_checks).
   bool removal_check = true;
   // --no-tentative-effect sets false: where no effect passes alone and the base fit misses the
   // curves (outcome "unexplained"), the candidate of lowest criterion that lowers the error is added
@@ -541,15 +547,17 @@ struct Diagnosis {
   std::vector<AddedEffect> added;
   // Each effect added, its removal check (removal_criteria): the model with the others (the base
   // alone for one) re-calibrated without it, and the criterion change from that fit to the model
-  // with all. An effect whose removal costs no evidence is dropped again (`dropped`), left out of
-  // `chosen`. An undecided verdict gets the same check of its closest fit (the candidate of lowest
-  // error): where `dropped`, no effect is needed there (or none found) and the outcome says so.
+  // with all. An effect no longer needed (its removal costs no evidence, or the fit without it is
+  // explained) is dropped again (`dropped`), left out of `chosen`. An undecided verdict gets the same
+  // check of its closest fit (the candidate of lowest error): where `dropped`, no effect is needed
+  // there (or none found) and the outcome says so.
   struct RemovalCheck {
     std::string effect;
     double criterion = kNaN;      // negative: the effect still pays for its parameters; NaN: no fit
     double error_without = kNaN;  // N, the fit without it
     std::string folder;           // its calibration
     bool dropped = false;
+    double explained_level = kNaN;  // N: a fit without it at or below this is explained (removal_criteria)
   };
   std::vector<RemovalCheck> removal_checks;
   PairSearch pair_search;  // DiagnoseOptions::pair_rounds
