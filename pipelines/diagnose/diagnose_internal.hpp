@@ -375,9 +375,6 @@ std::string fitted_effect_parameters(const EffectCandidate& c, const Diagnosis& 
 // `note` (a sentence with its leading space, "" = none) appended to the verdict and to its notes;
 // the verdict before the first note is its conclusion.
 void add_note(Diagnosis& d, const std::string& note);
-// The advice of a longer search (more_search_note) taken back from the verdict and its notes, for a
-// verdict that a later check settled; `per_candidate` as when it was given.
-void withdraw_search_advice(Diagnosis& d, long per_candidate);
 
 
 }  // namespace demcal::pipelines::detail

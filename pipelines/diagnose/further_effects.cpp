@@ -140,20 +140,17 @@ std::string effects_text(const std::vector<ModelEffect>& effects, const std::map
   return text;
 }
 
-// The outcome and headline where the base model alone, re-fitted from `effect`'s fit (its error in
-// d.error_after), does as well: what the effect gained was the base parameters' search, not the
-// effect. `errors`: the error of each step before, "492 → 331".
+// The outcome, conclusion (conclude_on_base_alone) and headline where the base model alone,
+// re-fitted from `effect`'s fit (its error in d.error_after), does as well: what the effect gained
+// was the base parameters' search, not the effect. `errors`: the error of each step before, "492 → 331".
 void settle_on_base_alone(Diagnosis& d, const DiagnosisRun& run, const std::string& effect, const std::string& why,
                           const std::string& errors) {
-  d.chosen.clear();
-  d.outcome = d.error_after > 2 * floor_of(d, run.options) ? DiagnosisOutcome::unexplained
-                                                           : DiagnosisOutcome::no_effect_needed;
-  d.frequency.verdict = d.frequency.none;  // the verdict's choice is now no effect
-  if (d.outcome == DiagnosisOutcome::no_effect_needed) withdraw_search_advice(d, run.per_candidate);
-  d.headline = std::string(d.outcome == DiagnosisOutcome::unexplained ? "No effect found" : "No effect needed") +
-               ": the base model re-fitted from the " + effect + " fit reaches " + format_number(d.error_after, 3) +
-               " N, so " + why + "; force error " + errors + " → " + format_number(d.error_after, 3) +
-               " N against " + format_number(run.noise, 3) + " N of noise.";
+  const std::string settled = "the base model re-fitted from the " + effect + " fit reaches " +
+                              format_number(d.error_after, 3) + " N, so " + why;
+  conclude_on_base_alone(d, settled, floor_of(d, run.options), run.per_candidate);
+  d.headline = std::string(d.outcome == DiagnosisOutcome::unexplained ? "No effect found: " : "No effect needed: ") +
+               settled + "; force error " + errors + " → " + format_number(d.error_after, 3) + " N against " +
+               format_number(run.noise, 3) + " N of noise.";
 }
 
 // The level (N) at which removal_criteria calls a fit without an effect explained: step 2's.

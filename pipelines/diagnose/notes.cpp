@@ -281,14 +281,6 @@ void detail::add_note(Diagnosis& d, const std::string& note) {
   d.notes.push_back(note.substr(note.find_first_not_of(' ')));
 }
 
-void detail::withdraw_search_advice(Diagnosis& d, long per_candidate) {
-  const std::string note = more_search_note(d.advised_candidate_simulations, per_candidate);
-  d.advised_candidate_simulations = 0;
-  if (note.empty()) return;
-  if (const auto at = d.verdict.find(note); at != std::string::npos) d.verdict.erase(at, note.size());
-  std::erase(d.notes, note.substr(note.find_first_not_of(' ')));
-}
-
 void detail::add_verdict_notes(DiagnosisRun& run) {
   Diagnosis& d = run.d;
   if (!run.at_noise) {

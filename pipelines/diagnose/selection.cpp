@@ -306,6 +306,25 @@ void conclude_tentative(Diagnosis& d, const EffectCandidate& first) {
   d.conclusion = alone;
 }
 
+void conclude_on_base_alone(Diagnosis& d, const std::string& settled, double floor, long per_candidate) {
+  d.chosen.clear();
+  d.outcome = d.error_after > kUnexplainedRatio * floor ? DiagnosisOutcome::unexplained : DiagnosisOutcome::no_effect_needed;
+  d.frequency.verdict = d.frequency.none;
+  if (d.outcome == DiagnosisOutcome::no_effect_needed) {
+    const std::string advice = more_search_note(d.advised_candidate_simulations, per_candidate);
+    d.advised_candidate_simulations = 0;
+    if (const auto at = d.verdict.find(advice); !advice.empty() && at != std::string::npos) d.verdict.erase(at, advice.size());
+    if (!advice.empty()) std::erase(d.notes, advice.substr(advice.find_first_not_of(' ')));
+  }
+  if (d.conclusion.empty() || d.verdict.rfind(d.conclusion, 0) != 0) return;
+  const std::string before = "Before the removal check: " + d.conclusion;
+  const std::string conclusion =
+      (d.outcome == DiagnosisOutcome::unexplained ? "No effect found: " : "No effect needed: ") + settled + ".";
+  d.verdict = conclusion + " " + before + d.verdict.substr(d.conclusion.size());
+  d.notes.insert(d.notes.begin(), before);
+  d.conclusion = conclusion;
+}
+
 double error_floor(double noise, double scatter, const DiagnoseOptions& options) {
   if (!std::isfinite(scatter)) return noise;
   return std::hypot(noise, std::min(scatter, options.scatter_floor_ratio * noise));

@@ -542,6 +542,41 @@ TEST(Evidence, AKeptTentativeEffectIsConcludedAsAddedTentatively) {
   EXPECT_EQ(d.headline, headline);
 }
 
+// Where the removal check leaves the base alone, the conclusion says what the check found instead of
+// the selection's, which would contradict the headline and stays as the first note; a settled "no
+// effect needed" takes back its advice of a longer search, and its frequency is that of no effect.
+TEST(Evidence, AVerdictTheRemovalCheckSettlesIsConcludedSo) {
+  Diagnosis d;
+  const std::string selection = "The data cannot tell which effect is missing: a or b explain the residual equally well.";
+  const std::string advice = more_search_note(160, 80);
+  const std::string check = "Removal check of the closest fit: ...";
+  d.conclusion = selection;
+  d.advised_candidate_simulations = 160;
+  d.notes = {advice.substr(1), check};
+  d.verdict = selection + advice + " " + check;
+  d.frequency.resamples = 200;
+  d.frequency.none = 0.81;
+  d.frequency.undecided = d.frequency.verdict = 0.15;
+  d.error_after = 43.3;
+  Diagnosis found = d;
+  const std::string settled = "the base model re-fitted from the a fit reaches 43.3 N, so a is not needed";
+  conclude_on_base_alone(d, settled, 40, 80);
+  EXPECT_EQ(d.outcome, DiagnosisOutcome::no_effect_needed);
+  EXPECT_EQ(d.conclusion, "No effect needed: " + settled + ".");
+  EXPECT_EQ(d.notes, (std::vector<std::string>{"Before the removal check: " + selection, check}));
+  EXPECT_EQ(d.verdict, d.conclusion + " " + d.notes[0] + " " + check);
+  EXPECT_EQ(d.advised_candidate_simulations, 0);
+  EXPECT_EQ(d.frequency.verdict, 0.81);
+  // above twice the floor: no effect found, a question still open, whose advice stays
+  found.error_after = 90;
+  conclude_on_base_alone(found, settled, 40, 80);
+  EXPECT_EQ(found.outcome, DiagnosisOutcome::unexplained);
+  EXPECT_EQ(found.conclusion, "No effect found: " + settled + ".");
+  EXPECT_EQ(found.advised_candidate_simulations, 160);
+  EXPECT_EQ(found.verdict, found.conclusion + " Before the removal check: " + selection + advice + " " + check);
+  EXPECT_EQ(found.notes.size(), 3u);
+}
+
 // The headline says in one sentence what was found: the missing effect with its parameters in
 // engineering units and the range the data allow, or why nothing is added, with the errors.
 TEST(Evidence, TheHeadlineIsOneSentenceWithTheFitAndItsRange) {

@@ -801,6 +801,15 @@ std::string tentative_effect(const Diagnosis& diagnosis, const DiagnoseOptions& 
 // the step did ("No effect passed alone (...); <effect> ... was added tentatively ..."), and the
 // verdict (the conclusion, then the notes) with it.
 void conclude_tentative(Diagnosis& diagnosis, const EffectCandidate& first);
+// Where the removal check leaves the base model alone (every effect added dropped, or an undecided
+// verdict's closest fit no longer needed; the re-fit's error already in error_after, N): the
+// outcome, "no effect found" above kUnexplainedRatio x `floor` (N) and "no effect needed" below; the
+// conclusion, the outcome's words and `settled` (what the check found, "the base model re-fitted
+// ... reaches 43.3 N, so ..."), in place of the selection's, which becomes the first note ("Before
+// the removal check: ..."), and the verdict with them; frequency.verdict the share of
+// the resamples choosing no effect; and, "no effect needed" being a settled verdict, no advice of a
+// longer search (the note more_search_note gave with `per_candidate` taken back, the number 0).
+void conclude_on_base_alone(Diagnosis& diagnosis, const std::string& settled, double floor, long per_candidate);
 
 // A sentence for the verdict when the chosen effect's fit, after any further search, still misses
 // the curves by more than the level at which the loop calls a fit explained (noise_level_ratio x
