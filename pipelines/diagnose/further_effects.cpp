@@ -391,8 +391,7 @@ void check_undecided_leader(DiagnosisRun& run) {
                           not_needed_because(d.removal_checks.back(), run.options.evidence,
                                              leader->effect + ", the closest fit,") + ")";
   settle_on_base_alone(d, run, leader->effect, why, format_number(d.error_before, 3));
-  add_note(d, " Removal check of the closest fit: " + why + "; the model without it, in " + folder.string() +
-                  ", fits to " + format_number(d.error_after, 3) + " N.");
+  add_note(d, " Removal check of the closest fit (the conclusion): the base model re-fitted in " + folder.string() + ".");
 }
 
 void add_further_effects(DiagnosisRun& run) {
