@@ -280,7 +280,8 @@ json Diagnosis::to_json() const {
   for (const auto& r : removal_checks)
     removals.push_back({{"effect", r.effect}, {"criterion", finite_or_null(r.criterion)},
                         {"error_without", finite_or_null(r.error_without)},
-                        {"explained_level", finite_or_null(r.explained_level)}, {"folder", r.folder}, {"dropped", r.dropped}});
+                        {"explained_level", finite_or_null(r.explained_level)}, {"folder", r.folder},
+                        {"dropped", r.dropped}});
   json points = json::object();
   for (const auto& [key, n] : effective_points)
     points[key] = {{"points", n}, {"from", effective_points_from.at(key)}};

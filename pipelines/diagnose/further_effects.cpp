@@ -161,9 +161,9 @@ double explained_level(const DiagnosisRun& run) { return run.options.noise_level
 std::string not_needed_because(const Diagnosis::RemovalCheck& check, double evidence, const std::string& effect) {
   if (check.criterion > -evidence)
     return "removing " + effect + " costs no evidence: criterion " + format_number(check.criterion, 3);
-  return "the fit without " + effect + " is already explained: " + format_number(check.error_without, 3) + " N against the " +
-         format_number(check.explained_level, 3) + " N below which a base fit needs no effect; criterion " +
-         format_number(check.criterion, 3);
+  return "the fit without " + effect + " is already explained: " + format_number(check.error_without, 3) +
+         " N against the " + format_number(check.explained_level, 3) +
+         " N below which a base fit needs no effect; criterion " + format_number(check.criterion, 3);
 }
 
 // The removal check of the effects added (Diagnosis::removal_checks): each of `effects` left out in
@@ -218,7 +218,8 @@ void check_removals(DiagnosisRun& run, const std::vector<ModelEffect>& effects, 
   std::vector<ModelEffect> kept = effects;
   kept.erase(kept.begin() + drop);
   d.error_after = without[k].error;
-  const std::string why = dropped.effect + " dropped again (" + not_needed_because(dropped, run.options.evidence, "it") + ")";
+  const std::string why =
+      dropped.effect + " dropped again (" + not_needed_because(dropped, run.options.evidence, "it") + ")";
   const std::string against = " N against " + format_number(run.noise, 3) + " N of noise";
   if (kept.empty()) {
     settle_on_base_alone(d, run, dropped.effect, why, errors);
@@ -391,7 +392,8 @@ void check_undecided_leader(DiagnosisRun& run) {
                           not_needed_because(d.removal_checks.back(), run.options.evidence,
                                              leader->effect + ", the closest fit,") + ")";
   settle_on_base_alone(d, run, leader->effect, why, format_number(d.error_before, 3));
-  add_note(d, " Removal check of the closest fit (the conclusion): the base model re-fitted in " + folder.string() + ".");
+  add_note(d, " Removal check of the closest fit (the conclusion): the base model re-fitted in " + folder.string() +
+                  ".");
 }
 
 void add_further_effects(DiagnosisRun& run) {

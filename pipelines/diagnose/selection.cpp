@@ -308,13 +308,16 @@ void conclude_tentative(Diagnosis& d, const EffectCandidate& first) {
 
 void conclude_on_base_alone(Diagnosis& d, const std::string& settled, double floor, long per_candidate) {
   d.chosen.clear();
-  d.outcome = d.error_after > kUnexplainedRatio * floor ? DiagnosisOutcome::unexplained : DiagnosisOutcome::no_effect_needed;
+  d.outcome =
+      d.error_after > kUnexplainedRatio * floor ? DiagnosisOutcome::unexplained : DiagnosisOutcome::no_effect_needed;
   d.frequency.verdict = d.frequency.none;
   if (d.outcome == DiagnosisOutcome::no_effect_needed) {
     const std::string advice = more_search_note(d.advised_candidate_simulations, per_candidate);
     d.advised_candidate_simulations = 0;
-    if (const auto at = d.verdict.find(advice); !advice.empty() && at != std::string::npos) d.verdict.erase(at, advice.size());
-    if (!advice.empty()) std::erase(d.notes, advice.substr(advice.find_first_not_of(' ')));
+    if (!advice.empty()) {
+      if (const auto at = d.verdict.find(advice); at != std::string::npos) d.verdict.erase(at, advice.size());
+      std::erase(d.notes, advice.substr(advice.find_first_not_of(' ')));
+    }
   }
   if (d.conclusion.empty() || d.verdict.rfind(d.conclusion, 0) != 0) return;
   const std::string before = "Before the removal check: " + d.conclusion;
