@@ -194,15 +194,16 @@ void check_removals(DiagnosisRun& run, const std::vector<ModelEffect>& effects, 
   run.runner.side_by_side(tasks, together);
   std::vector<std::vector<ChannelResidual>> residuals;
   std::vector<int> parameters;
+  const double explained = explained_level(run);
   for (std::size_t i = 0; i < effects.size(); ++i) {
     residuals.push_back(std::isfinite(without[i].error) ? without[i].residuals : std::vector<ChannelResidual>{});
     parameters.push_back(effects[i].fit->effect_parameters);
     d.removal_checks.push_back(
-        {effects[i].effect->name, Diagnosis::kNaN, without[i].error, folders[i].string(), false, explained_level(run)});
+        {effects[i].effect->name, Diagnosis::kNaN, without[i].error, folders[i].string(), false, explained});
   }
   int drop = -1;
   const std::vector<double> criteria =
-      removal_criteria(with_all, residuals, parameters, run.options.evidence, drop, explained_level(run));
+      removal_criteria(with_all, residuals, parameters, run.options.evidence, drop, explained);
   for (std::size_t i = 0; i < criteria.size(); ++i) d.removal_checks[i].criterion = criteria[i];
   if (drop < 0) {
     std::string costs;
@@ -376,11 +377,11 @@ void check_undecided_leader(DiagnosisRun& run) {
   std::map<std::string, double> set;
   const EffectCandidate without = fit_with(run, {}, run.best_sets.at(leader->effect), leader->residuals, folder, set);
   int drop = -1;
+  const double explained = explained_level(run);
   const std::vector<double> criterion = removal_criteria(
       leader->residuals, {std::isfinite(without.error) ? without.residuals : std::vector<ChannelResidual>{}},
-      {leader->effect_parameters}, run.options.evidence, drop, explained_level(run));
-  d.removal_checks.push_back(
-      {leader->effect, criterion.front(), without.error, folder.string(), drop == 0, explained_level(run)});
+      {leader->effect_parameters}, run.options.evidence, drop, explained);
+  d.removal_checks.push_back({leader->effect, criterion.front(), without.error, folder.string(), drop == 0, explained});
   if (drop != 0) {
     add_note(d, " Removal check of the closest fit: the base model re-fitted from the " + leader->effect + " fit, in " +
                     folder.string() + ", reaches " + format_number(without.error, 3) + " N, criterion " +
